@@ -1,0 +1,249 @@
+"""The one loop every actor runs (Kimera-VIO's PipelineModule idea).
+
+An actor is a small class with ``setup`` / ``on_message`` / ``on_tick`` /
+``teardown``; the algorithm lives elsewhere and ``on_message`` is its
+``spin_once``. Everything else lives here, once: ZeroMQ sockets, timing of
+every call (service time and queue wait), CPU and RSS sampling, a stats
+message every second that doubles as the heartbeat, orderly shutdown, and
+turning an exception into an ``ActorError`` for the supervisor instead of a
+silent death.
+
+Sockets (all ipc:// on one host):
+- ``inbox``  PULL, bound by the actor: data messages from upstream actors.
+- ``control`` PULL, bound by the actor: Start / Shutdown from the supervisor.
+- ``events`` PUSH, connected to the supervisor: ready, stats, results, errors.
+- one PUSH per downstream actor, connected to that actor's inbox.
+PUSH/PULL (not PUB/SUB) so no message is lost to a slow joiner.
+"""
+from __future__ import annotations
+
+import importlib
+import os
+import signal
+import sys
+import time
+import traceback
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import psutil
+import zmq
+
+from protocol.codec import decode, encode
+from protocol.messages import ActorError, ActorReady, ActorStats, Shutdown
+from shared.errors import CanopyError
+
+STATS_PERIOD_S = 1.0
+
+
+@dataclass
+class ActorSpec:
+    """Everything a child process needs to become an actor (picklable)."""
+    name: str
+    factory: str                 # "module:Class"
+    config: dict
+    inbox: str                   # endpoint this actor binds for data
+    control: str                 # endpoint this actor binds for control
+    events: str                  # supervisor's endpoint
+    outputs: dict = field(default_factory=dict)  # downstream name -> inbox endpoint
+    seed: int = 0
+
+
+class ActorContext:
+    """What an actor may do to the outside world."""
+
+    def __init__(self, spec: ActorSpec, zctx: zmq.Context):
+        self.spec = spec
+        self.name = spec.name
+        self._zctx = zctx
+        self._out: dict[str, zmq.Socket] = {}
+        for target, endpoint in spec.outputs.items():
+            sock = zctx.socket(zmq.PUSH)
+            sock.setsockopt(zmq.LINGER, 1000)
+            sock.connect(endpoint)
+            self._out[target] = sock
+        self._events = zctx.socket(zmq.PUSH)
+        self._events.setsockopt(zmq.LINGER, 2000)
+        self._events.connect(spec.events)
+        self.inbox = zctx.socket(zmq.PULL)
+        self.inbox.bind(spec.inbox)
+        self.control = zctx.socket(zmq.PULL)
+        self.control.bind(spec.control)
+        self.dropped = 0
+        self.extra: dict[str, Any] = {}
+        self.stop_requested = False
+
+    def send(self, target: str, msg: Any, block: bool = True) -> bool:
+        """Send to a downstream actor. ``block=False`` gives up (returns False)
+        when the peer is gone or its queue is full, e.g. after it finished."""
+        sock = self._out.get(target)
+        if sock is None:
+            raise CanopyError(f"actor {self.name!r} has no output named {target!r}")
+        try:
+            sock.send(encode(msg), 0 if block else zmq.NOBLOCK)
+        except zmq.Again:
+            return False
+        return True
+
+    def has_output(self, target: str) -> bool:
+        return target in self._out
+
+    def publish(self, msg: Any) -> None:
+        """Send to the supervisor (results, stats, errors)."""
+        self._events.send(encode(msg))
+
+    def recv_inbox(self, timeout_ms: int) -> Any | None:
+        """Blocking receive on the inbox for actors that must wait (lockstep)."""
+        if self.inbox.poll(timeout_ms):
+            return decode(self.inbox.recv())
+        return None
+
+    def drain_inbox(self) -> list[Any]:
+        out = []
+        while self.inbox.poll(0):
+            out.append(decode(self.inbox.recv()))
+        return out
+
+    def stop(self) -> None:
+        self.stop_requested = True
+
+    def close(self) -> None:
+        for sock in [*self._out.values(), self._events, self.inbox, self.control]:
+            sock.close()
+
+
+class Actor:
+    """Base class: override what you need. ``on_message`` is the spin_once."""
+
+    name = "actor"
+
+    def __init__(self, config: dict, seed: int = 0):
+        self.config = config
+        self.seed = seed
+
+    def setup(self, ctx: ActorContext) -> None:
+        pass
+
+    def on_message(self, msg: Any, ctx: ActorContext) -> None:
+        pass
+
+    def on_control(self, msg: Any, ctx: ActorContext) -> None:
+        pass
+
+    def next_tick_s(self) -> float | None:
+        """Seconds until ``on_tick`` wants to run; None = only on messages."""
+        return None
+
+    def on_tick(self, ctx: ActorContext) -> None:
+        pass
+
+    def teardown(self, ctx: ActorContext) -> None:
+        pass
+
+
+class _Meter:
+    """Per-message timings since the last stats message, plus process load."""
+
+    def __init__(self):
+        self.proc = psutil.Process()
+        self.proc.cpu_percent(None)
+        self.service: list[float] = []
+        self.queue: list[float] = []
+        self.messages = 0
+        self.seq = 0
+        self.peak_rss = 0.0
+        self.last = time.monotonic()
+
+    def record(self, service_ms: float, queue_ms: float | None) -> None:
+        self.messages += 1
+        self.service.append(service_ms)
+        if queue_ms is not None:
+            self.queue.append(max(queue_ms, 0.0))
+
+    def stats(self, name: str, ctx: ActorContext, final: bool = False) -> ActorStats:
+        rss = self.proc.memory_info().rss / 2**20
+        self.peak_rss = max(self.peak_rss, rss)
+        msg = ActorStats(actor=name, pid=os.getpid(), seq=self.seq, messages=self.messages,
+                         dropped=ctx.dropped, service_ms=np.asarray(self.service, np.float32),
+                         queue_ms=np.asarray(self.queue, np.float32),
+                         cpu_percent=float(self.proc.cpu_percent(None)), rss_mb=rss,
+                         peak_rss_mb=self.peak_rss, extra=dict(ctx.extra), final=final)
+        self.seq += 1
+        self.service, self.queue = [], []
+        self.last = time.monotonic()
+        return msg
+
+
+def _load_factory(path: str):
+    module, _, cls = path.partition(":")
+    return getattr(importlib.import_module(module), cls)
+
+
+def actor_main(spec: ActorSpec) -> None:
+    """Entry point of an actor process."""
+    # Ctrl-C reaches the whole process group; only the supervisor decides.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    parent = os.getppid()
+    zctx = zmq.Context()
+    ctx = None
+    actor = None
+    exit_code = 0
+    current_index = -1
+    try:
+        ctx = ActorContext(spec, zctx)
+        actor = _load_factory(spec.factory)(spec.config, seed=spec.seed)
+        actor.name = spec.name
+        actor.setup(ctx)
+        ctx.publish(ActorReady(actor=spec.name, pid=os.getpid()))
+        meter = _Meter()
+        poller = zmq.Poller()
+        poller.register(ctx.control, zmq.POLLIN)
+        poller.register(ctx.inbox, zmq.POLLIN)
+        while not ctx.stop_requested:
+            tick = actor.next_tick_s()
+            timeout_ms = 100 if tick is None else max(0, min(100, int(tick * 1000)))
+            ready = dict(poller.poll(timeout_ms))
+            if ctx.control in ready:
+                msg = decode(ctx.control.recv())
+                if isinstance(msg, Shutdown):
+                    break
+                actor.on_control(msg, ctx)
+            if ctx.inbox in ready:
+                msg = decode(ctx.inbox.recv())
+                current_index = getattr(msg, "index", current_index)
+                t_recv = time.time()
+                sent = getattr(msg, "sent_at", 0.0)
+                t0 = time.perf_counter()
+                actor.on_message(msg, ctx)
+                meter.record((time.perf_counter() - t0) * 1e3, (t_recv - sent) * 1e3 if sent else None)
+            tick = actor.next_tick_s()
+            if tick is not None and tick <= 0:
+                actor.on_tick(ctx)
+            if time.monotonic() - meter.last >= STATS_PERIOD_S:
+                ctx.publish(meter.stats(spec.name, ctx))
+            if os.getppid() != parent:  # supervisor vanished: do not linger as an orphan
+                break
+        actor.teardown(ctx)
+        ctx.publish(meter.stats(spec.name, ctx, final=True))
+    except CanopyError as exc:
+        exit_code = 1
+        _report(ctx, spec.name, str(exc), traceback.format_exc(), current_index)
+    except Exception as exc:  # an actor must report, never die silently
+        exit_code = 1
+        _report(ctx, spec.name, f"{type(exc).__name__}: {exc}", traceback.format_exc(), current_index)
+    finally:
+        if ctx is not None:
+            ctx.close()
+        zctx.term()
+    sys.exit(exit_code)
+
+
+def _report(ctx: ActorContext | None, name: str, error: str, detail: str, index: int) -> None:
+    if ctx is None:
+        sys.stderr.write(f"[{name}] {error}\n")
+        return
+    try:
+        ctx.publish(ActorError(actor=name, error=error, detail=detail, frame_index=index))
+    except Exception:
+        sys.stderr.write(f"[{name}] {error}\n")

@@ -1,0 +1,83 @@
+"""Source actor: reads a dataset and writes stereo frames into the raw ring.
+
+lockstep: the next frame is written only after tracking reports the previous
+one done, so every run is identical. realtime: frames are released at the
+dataset's timestamps; a frame whose release time has already passed by more
+than one period when it could be read is dropped and counted, as a camera
+driver would.
+"""
+from __future__ import annotations
+
+import time
+
+from actors.runtime import Actor, ActorContext
+from canopy.sources import open_source
+from protocol.messages import EndOfStream, FrameDone, FrameHandle, Start
+from shared.ring import FrameRing
+
+
+class SourceActor(Actor):
+    name = "source"
+
+    def setup(self, ctx: ActorContext) -> None:
+        c = self.config
+        self.source = open_source(c["kind"], c["path"], max_frames=c.get("max_frames"))
+        self.ring = FrameRing.attach(c["ring"])
+        self.lockstep = c["clock"] == "lockstep"
+        self.speed = float(c.get("realtime_speed", 1.0))
+        self.stamps = self.source.timestamps
+        self.period = 1.0 / max(self.source.rate_hz, 1e-6) / self.speed
+        self.next_index = 0
+        self.started = False
+        self.awaiting = False
+        self.t0 = 0.0
+        self.sent = 0
+
+    def on_control(self, msg, ctx: ActorContext) -> None:
+        if isinstance(msg, Start):
+            self.started = True
+            self.t0 = time.monotonic()
+
+    def on_message(self, msg, ctx: ActorContext) -> None:
+        if isinstance(msg, FrameDone):
+            self.awaiting = False
+
+    def _release_time(self, i: int) -> float:
+        return self.t0 + (self.stamps[i] - self.stamps[0]) / self.speed
+
+    def next_tick_s(self) -> float | None:
+        if not self.started or ctx_done(self):
+            return None
+        if self.lockstep:
+            return None if self.awaiting else 0.0
+        if self.next_index >= len(self.source):
+            return 0.0
+        return self._release_time(self.next_index) - time.monotonic()
+
+    def on_tick(self, ctx: ActorContext) -> None:
+        n = len(self.source)
+        if self.next_index >= n:
+            ctx.send("enhancement", EndOfStream(n_frames=self.sent, sent_at=time.time()))
+            ctx.extra["frames_sent"] = self.sent
+            self.next_index = n + 1
+            ctx.stop()
+            return
+        i = self.next_index
+        self.next_index += 1
+        if not self.lockstep and time.monotonic() - self._release_time(i) > self.period:
+            ctx.dropped += 1  # too late to be useful: a live camera would have overwritten it
+            return
+        frame = self.source.frame(i)
+        slot, gen = self.ring.write(frame.index, frame.timestamp, [frame.left, frame.right])
+        ctx.send("enhancement", FrameHandle(index=frame.index, timestamp=frame.timestamp, ring=self.ring.name,
+                                            slot=slot, generation=gen, sent_at=time.time()))
+        self.sent += 1
+        ctx.extra["frames_sent"] = self.sent
+        self.awaiting = self.lockstep
+
+    def teardown(self, ctx: ActorContext) -> None:
+        self.ring.close()
+
+
+def ctx_done(actor: SourceActor) -> bool:
+    return actor.next_index > len(actor.source)

@@ -1,0 +1,254 @@
+"""Starts the actors, watches them, and always cleans up.
+
+The supervisor owns the shared-memory rings and the ipc:// socket folder. It
+starts each actor as its own OS process, waits for every ``ready`` message
+(never a sleep), tells the source to start, then relays events to the run's
+collector while watching for trouble: an actor that exits with an error, is
+killed, or stops sending its once-a-second heartbeat ends the run. Whatever
+happens (normal end, Ctrl-C, SIGTERM, a killed actor) the rings are
+unlinked, the socket folder removed and the remaining actors stopped within
+the grace period, so what was computed so far can still be written out.
+
+Every event is also re-published on an optional inspection endpoint
+(ZeroMQ PUB, multipart ``[kind, payload]``) for remote clients.
+"""
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import shutil
+import signal
+import tempfile
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import msgpack
+import zmq
+
+from actors.runtime import ActorSpec, actor_main
+from protocol.codec import decode, encode
+from protocol.messages import ActorError, ActorReady, ActorStats, Shutdown, Start
+from shared.errors import ProtocolError
+from shared.ring import FrameRing, remove_segment
+
+
+@dataclass
+class RingSpec:
+    name: str
+    n_slots: int
+    height: int
+    width: int
+    n_images: int = 2
+
+
+@dataclass
+class RunOutcome:
+    ok: bool
+    reason: str = ""
+    failed_actor: str | None = None
+    interrupted: bool = False
+    wall_s: float = 0.0
+    exit_codes: dict = field(default_factory=dict)
+
+
+class _Terminate(Exception):
+    pass
+
+
+def _signal_name(code: int | None) -> str:
+    if code is None:
+        return "still running"
+    if code < 0:
+        try:
+            return f"killed by {signal.Signals(-code).name}"
+        except ValueError:
+            return f"killed by signal {-code}"
+    return f"exit code {code}"
+
+
+class Supervisor:
+    def __init__(self, actors: list[ActorSpec], rings: list[RingSpec], source: str,
+                 on_event: Callable[[Any], None], heartbeat_timeout_s: float = 5.0,
+                 ready_timeout_s: float = 60.0, grace_s: float = 1.0,
+                 inspect_endpoint: str | None = None, run_dir: str | None = None):
+        self.specs = actors
+        self.ring_specs = rings
+        self.source = source
+        self.on_event = on_event
+        self.heartbeat_timeout_s = heartbeat_timeout_s
+        self.ready_timeout_s = ready_timeout_s
+        self.grace_s = grace_s
+        self.inspect_endpoint = inspect_endpoint
+        self.run_dir = run_dir
+        self.procs: dict[str, mp.Process] = {}
+        self.rings: list[FrameRing] = []
+        self.last_seen: dict[str, float] = {}
+        self.finished: set[str] = set()
+
+    # -- wiring helpers -----------------------------------------------------------------
+    @staticmethod
+    def make_run_dir() -> str:
+        # Short path: ipc:// endpoints must fit in a sockaddr_un (~107 bytes).
+        return tempfile.mkdtemp(prefix="canopy-")
+
+    @staticmethod
+    def endpoints(run_dir: str, name: str) -> tuple[str, str]:
+        return f"ipc://{run_dir}/{name}.in", f"ipc://{run_dir}/{name}.ctl"
+
+    # -- main ------------------------------------------------------------------------------
+    def run(self) -> RunOutcome:
+        t_start = time.monotonic()
+        outcome = RunOutcome(ok=False)
+        zctx = zmq.Context()
+        events = zctx.socket(zmq.PULL)
+        inspect = None
+        controls: dict[str, zmq.Socket] = {}
+        old_term = signal.getsignal(signal.SIGTERM)
+
+        def on_term(signum, frame):
+            raise _Terminate()
+
+        signal.signal(signal.SIGTERM, on_term)
+        try:
+            events.bind(self.specs[0].events)
+            if self.inspect_endpoint:
+                inspect = zctx.socket(zmq.PUB)
+                inspect.setsockopt(zmq.SNDHWM, 1000)
+                inspect.bind(self.inspect_endpoint)
+            for rs in self.ring_specs:
+                remove_segment(rs.name)  # a stale segment from a crashed run of the same name
+                self.rings.append(FrameRing.create(rs.name, rs.n_slots, rs.height, rs.width, rs.n_images))
+            spawn = mp.get_context("spawn")
+            for spec in self.specs:
+                proc = spawn.Process(target=actor_main, args=(spec,), name=f"canopy-{spec.name}", daemon=False)
+                proc.start()
+                self.procs[spec.name] = proc
+                ctl = zctx.socket(zmq.PUSH)
+                ctl.setsockopt(zmq.LINGER, 500)
+                ctl.connect(spec.control)
+                controls[spec.name] = ctl
+            outcome = self._supervise(events, inspect, controls)
+        except (KeyboardInterrupt, _Terminate):
+            outcome = RunOutcome(ok=False, reason="interrupted by the user", interrupted=True)
+        finally:
+            signal.signal(signal.SIGTERM, old_term)
+            try:
+                self._stop_all(controls, outcome.reason or "run finished")
+            except (KeyboardInterrupt, _Terminate):
+                self._kill_all()
+            outcome.exit_codes = {n: p.exitcode for n, p in self.procs.items()}
+            self._drain(events, inspect)
+            for sock in [events, *controls.values()] + ([inspect] if inspect is not None else []):
+                sock.close(linger=0)
+            zctx.term()
+            for ring in self.rings:
+                ring.close()
+                ring.unlink()
+            if self.run_dir:
+                shutil.rmtree(self.run_dir, ignore_errors=True)
+            outcome.wall_s = time.monotonic() - t_start
+        return outcome
+
+    def _dispatch(self, payload: bytes, inspect) -> Any:
+        try:
+            msg = decode(payload)
+        except ProtocolError as exc:
+            self.on_event(ActorError(actor="supervisor", error=f"malformed event dropped: {exc}"))
+            return None
+        if inspect is not None:
+            inspect.send_multipart([msg.KIND.encode(), payload])
+        self.on_event(msg)
+        return msg
+
+    def _drain(self, events, inspect) -> None:
+        while events.poll(0):
+            self._dispatch(events.recv(), inspect)
+
+    def _supervise(self, events, inspect, controls) -> RunOutcome:
+        ready: set[str] = set()
+        deadline = time.monotonic() + self.ready_timeout_s
+        while len(ready) < len(self.specs):
+            if events.poll(100):
+                msg = self._dispatch(events.recv(), inspect)
+                if isinstance(msg, ActorReady):
+                    ready.add(msg.actor)
+                    self.last_seen[msg.actor] = time.monotonic()
+                elif isinstance(msg, ActorError):
+                    return RunOutcome(False, f"actor '{msg.actor}' failed during set-up: {msg.error}", msg.actor)
+            dead = self._dead_actor()
+            if dead:
+                return dead
+            if time.monotonic() > deadline:
+                missing = sorted({s.name for s in self.specs} - ready)
+                return RunOutcome(False, f"actors not ready after {self.ready_timeout_s:.0f} s: {missing}")
+        controls[self.source].send(encode(Start()))
+        while True:
+            if events.poll(100):
+                while True:
+                    msg = self._dispatch(events.recv(), inspect)
+                    if isinstance(msg, ActorStats):
+                        self.last_seen[msg.actor] = time.monotonic()
+                        if msg.final:
+                            self.finished.add(msg.actor)
+                    elif isinstance(msg, ActorError):
+                        where = f" at frame {msg.frame_index}" if msg.frame_index >= 0 else ""
+                        return RunOutcome(False, f"actor '{msg.actor}' failed{where}: {msg.error}", msg.actor)
+                    if not events.poll(0):
+                        break
+            dead = self._dead_actor()
+            if dead:
+                return dead
+            if all(not p.is_alive() for p in self.procs.values()):
+                return RunOutcome(True, "completed")
+            now = time.monotonic()
+            for name, seen in self.last_seen.items():
+                if name not in self.finished and now - seen > self.heartbeat_timeout_s:
+                    return RunOutcome(False, f"actor '{name}' sent no heartbeat for {now - seen:.1f} s "
+                                             f"(hung?)", name)
+
+    def _dead_actor(self) -> RunOutcome | None:
+        for name, proc in self.procs.items():
+            code = proc.exitcode
+            if code is not None and code != 0:
+                return RunOutcome(False, f"actor '{name}' died ({_signal_name(code)})", name)
+        return None
+
+    def _stop_all(self, controls, reason: str) -> None:
+        for name, proc in self.procs.items():
+            if proc.is_alive() and name in controls:
+                try:
+                    controls[name].send(encode(Shutdown(reason=reason)), zmq.NOBLOCK)
+                except zmq.ZMQError:
+                    pass
+        deadline = time.monotonic() + self.grace_s
+        for proc in self.procs.values():
+            proc.join(max(0.0, deadline - time.monotonic()))
+        for proc in self.procs.values():
+            if proc.is_alive():
+                proc.terminate()
+        deadline = time.monotonic() + 0.5
+        for proc in self.procs.values():
+            proc.join(max(0.0, deadline - time.monotonic()))
+        self._kill_all()
+
+    def _kill_all(self) -> None:
+        for proc in self.procs.values():
+            if proc.is_alive():
+                proc.kill()
+                proc.join(1.0)
+
+
+def inspection_client(endpoint: str, kinds: list[str] | None = None, timeout_s: float = 10.0):
+    """Yield messages from a running supervisor's inspection endpoint."""
+    zctx = zmq.Context.instance()
+    sub = zctx.socket(zmq.SUB)
+    sub.connect(endpoint)
+    for kind in (kinds or [""]):
+        sub.setsockopt(zmq.SUBSCRIBE, kind.encode())
+    try:
+        while sub.poll(int(timeout_s * 1000)):
+            _, payload = sub.recv_multipart()
+            yield decode(payload)
+    finally:
+        sub.close(linger=0)

@@ -1,0 +1,103 @@
+"""Runs one SLAM session: source → enhancement → tracking → local mapping.
+
+``run_slam`` is what ``launch.py`` calls and what tests and benchmarks call:
+it validates everything it can before any process starts (dataset, config,
+image size), wires the actors, runs the supervisor, and always writes what
+was computed to the output folder.
+"""
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from actors.collector import RunCollector, format_summary
+from actors.runtime import ActorSpec
+from actors.supervisor import RingSpec, RunOutcome, Supervisor
+from canopy.config import REPO_ROOT, load_run_config, with_overrides
+from canopy.sources import open_source
+
+DATASETS = ("euroc", "kitti", "folder")
+
+
+@dataclass
+class RunResult:
+    outcome: RunOutcome
+    summary: dict
+    out_dir: Path
+    text: str
+
+
+def default_out_dir(dataset: str) -> Path:
+    return REPO_ROOT / "results" / f"{dataset}-{time.strftime('%Y%m%d-%H%M%S')}"
+
+
+def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_frames: int | None,
+                      rings: dict[str, str], calib) -> list[ActorSpec]:
+    ep = {name: Supervisor.endpoints(run_dir, name) for name in ("source", "enhancement", "tracking", "local_mapping")}
+    events = f"ipc://{run_dir}/supervisor.events"
+    rt = cfg.runtime
+    common = {"clock": rt.clock}
+
+    def spec(name, factory, config, outputs):
+        return ActorSpec(name=name, factory=factory, config={**common, **config}, inbox=ep[name][0],
+                         control=ep[name][1], events=events, outputs={o: ep[o][0] for o in outputs}, seed=rt.seed)
+
+    return [
+        spec("source", "actors.source:SourceActor",
+             {"kind": dataset, "path": path, "max_frames": max_frames, "ring": rings["raw"],
+              "realtime_speed": rt.realtime_speed}, ["enhancement"]),
+        spec("enhancement", "actors.enhancement:EnhancementActor",
+             {"in_ring": rings["raw"], "out_ring": rings["enhanced"], "params": cfg.enhancement}, ["tracking"]),
+        spec("tracking", "actors.tracking:TrackingActor",
+             {"ring": rings["enhanced"], "calib": calib, "params": cfg.tracking,
+              "enhancement": cfg.enhancement, "lockstep_wait_s": rt.lockstep_wait_s},
+             ["local_mapping", "source"]),
+        spec("local_mapping", "actors.local_mapping:LocalMappingActor",
+             {"calib": calib, "params": cfg.mapping, "snapshot_period_s": rt.map_snapshot_period_s},
+             ["tracking"]),
+    ]
+
+
+def run_slam(dataset: str, path: str | None = None, config: str | None = None, out: str | None = None,
+             clock: str | None = None, max_frames: int | None = None, enhance: str | None = None,
+             inspect: str | None = None, progress: bool = True) -> RunResult:
+    if dataset not in DATASETS:
+        from shared.errors import ConfigError
+        raise ConfigError("--dataset", f"unknown dataset {dataset!r}; choose one of {DATASETS}")
+    cfg = with_overrides(load_run_config(dataset, config), clock=clock, enhance=enhance)
+    source = open_source(dataset, path, max_frames=max_frames)  # validates the dataset before any process starts
+    calib = source.calibration
+    out_dir = Path(out) if out else default_out_dir(dataset)
+    run_dir = Supervisor.make_run_dir()
+    tag = f"canopy_{os.getpid()}_{int(time.time() * 1000) % 100000}"
+    rings = {"raw": f"{tag}_raw", "enhanced": f"{tag}_enh"}
+    specs = build_actor_specs(run_dir, cfg, dataset, path, max_frames, rings, calib)
+    collector = RunCollector(n_frames=len(source), progress=progress)
+    supervisor = Supervisor(
+        specs, [RingSpec(rings["raw"], cfg.runtime.ring_slots, calib.height, calib.width),
+                RingSpec(rings["enhanced"], cfg.runtime.ring_slots, calib.height, calib.width)],
+        source="source", on_event=collector, heartbeat_timeout_s=cfg.runtime.heartbeat_timeout_s,
+        ready_timeout_s=cfg.runtime.ready_timeout_s, grace_s=cfg.runtime.grace_s,
+        inspect_endpoint=inspect, run_dir=run_dir)
+    outcome = supervisor.run()
+    collector.finish_progress()
+    run_info = {"dataset": dataset, "path": str(source.root) if hasattr(source, "root") else path,
+                "source": source.name, "clock": cfg.runtime.clock,
+                "enhancement": getattr(cfg.enhancement, "method", "none"), "config_file": cfg.source_file,
+                "outcome": outcome.reason, "ok": outcome.ok, "wall_s": outcome.wall_s,
+                "frames_per_s": len(collector.poses) / outcome.wall_s if outcome.wall_s else None,
+                "cpu_count": os.cpu_count(), "calibration": calib.to_dict(),
+                "errors": [{"actor": e.actor, "error": e.error, "frame": e.frame_index} for e in collector.errors]}
+    summary = collector.write_outputs(out_dir, source.ground_truth, run_info)
+    _write_config(out_dir, cfg)
+    text = format_summary(summary, outcome.reason, os.cpu_count() or 1)
+    return RunResult(outcome=outcome, summary=summary, out_dir=out_dir, text=text)
+
+
+def _write_config(out_dir: Path, cfg) -> None:
+    import yaml
+    doc = {"runtime": asdict(cfg.runtime), "enhancement": asdict(cfg.enhancement),
+           "tracking": asdict(cfg.tracking), "mapping": asdict(cfg.mapping)}
+    (out_dir / "config_used.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
