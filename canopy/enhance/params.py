@@ -1,0 +1,116 @@
+"""Parameters of the enhancement stage (one frozen dataclass, papers' values as defaults).
+
+Sources of the defaults:
+- AGRI-SLAM §3.1: ``omega`` = 0.8, ``block`` (Ω) = 9, ``n_dark_pixels`` = 200.
+  ``t0`` is not in the paper; 0.1 is He et al.'s lower bound on the
+  transmission (dark channel prior), needed so Eq. 4 never divides by ~0.
+- AFE-ORB-SLAM §4: ``tau`` = 0.3 (Eq. 9), ``low_contrast_lambda`` = 0.25
+  (Eq. 1/17), ``usm_alpha`` = 1.0 and ``usm_beta`` = 0.3 (Eq. 17),
+  ``fast_omega`` = 128 (Eq. 18–19). The paper gives neither the weighting
+  exponent ``i`` of Eq. 3 nor the Gaussian σ of Eq. 16: ``wd_exponent`` = 0.75
+  is Cao et al.'s IAGCWD value for the truncated (dimmed-image) branch that
+  Algorithm 1 describes; ``usm_sigma`` = 1.0 is scikit-image's
+  ``unsharp_mask`` default radius.
+- CLAHE baseline: OpenCV's clip limit 2.0 and 8×8 tiles.
+- ``auto_*`` thresholds are ours (see ``canopy.enhance.auto``), chosen from
+  the statistics of the real images in ``../shared/data``: EuRoC V1_01 grey
+  mean 145 / std 53, KITTI 06 mean 93 / std 60, O-HAZE hazy photos mean 140 /
+  std 22 / dark channel 126–131, LOL/LIME/DICM low-light photos mean 6–45.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from shared.errors import ConfigError
+
+ENHANCE_METHODS = ("none", "he", "clahe", "afe", "agri", "auto")
+# What ``auto`` may decide per frame ("dehaze" = dark channel prior on the image itself).
+AUTO_DECISIONS = ("none", "agri", "dehaze", "afe")
+
+
+@dataclass(frozen=True)
+class EnhanceParams:
+    method: str = "none"
+    # AGRI §3.1, Eq. 1–5
+    omega: float = 0.8
+    block: int = 9
+    n_dark_pixels: int = 200
+    t0: float = 0.1
+    # AFE §4.1, Eq. 1–17
+    tau: float = 0.3
+    wd_exponent: float = 0.75
+    low_contrast_lambda: float = 0.25
+    usm_alpha: float = 1.0
+    usm_beta: float = 0.3
+    usm_sigma: float = 1.0
+    # CLAHE baseline
+    clahe_clip: float = 2.0
+    clahe_tiles: int = 8
+    # auto (ours): statistics on a copy downsampled by ``auto_downsample``
+    auto_downsample: int = 4
+    auto_dark_mean: float = 60.0     # mean grey below this: under-exposed -> agri
+    auto_bright_mean: float = 200.0  # mean grey above this: over-exposed -> afe
+    auto_low_std: float = 28.0       # std (downsampled copy) below this: low contrast
+    auto_haze_dark: float = 100.0    # mean dark channel at/above this (with low std): hazy -> dehaze
+    # AFE §4.2, Eq. 18–19
+    adaptive_fast: bool = True
+    fast_omega: float = 128.0
+    min_keypoints: int = 200  # fewer keypoints than this at Eq. 18's θ: retry with Eq. 19's θ
+
+    def __post_init__(self):
+        self.validate()
+
+    def validate(self) -> None:
+        def bad(name: str, why: str):
+            raise ConfigError(f"EnhanceParams.{name}", f"{why}, got {getattr(self, name)!r}")
+
+        for name in ("omega", "t0", "tau", "wd_exponent", "low_contrast_lambda", "usm_alpha",
+                     "usm_beta", "usm_sigma", "clahe_clip", "auto_dark_mean", "auto_bright_mean",
+                     "auto_low_std", "auto_haze_dark", "fast_omega"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                bad(name, "must be a finite number")
+        for name in ("block", "n_dark_pixels", "clahe_tiles", "auto_downsample", "min_keypoints"):
+            if isinstance(getattr(self, name), bool) or not isinstance(getattr(self, name), int):
+                bad(name, "must be an integer")
+        if not isinstance(self.adaptive_fast, bool):
+            bad("adaptive_fast", "must be true or false")
+        if self.method not in ENHANCE_METHODS:
+            bad("method", f"must be one of {', '.join(ENHANCE_METHODS)}")
+        if not 0.0 < self.omega <= 1.0:
+            bad("omega", "must be in (0, 1]")
+        if self.block < 1 or self.block % 2 == 0:
+            bad("block", "must be a positive odd integer")
+        if self.n_dark_pixels < 1:
+            bad("n_dark_pixels", "must be >= 1")
+        if not 0.0 < self.t0 <= 1.0:
+            bad("t0", "must be in (0, 1]")
+        if not 0.0 <= self.tau <= 1.0:
+            bad("tau", "must be in [0, 1]")
+        if not self.wd_exponent > 0.0:
+            bad("wd_exponent", "must be > 0")
+        if not 0.0 <= self.low_contrast_lambda <= 1.0:
+            bad("low_contrast_lambda", "must be in [0, 1]")
+        for name in ("usm_alpha", "usm_beta"):
+            if not getattr(self, name) >= 0.0:
+                bad(name, "must be >= 0")
+        if not self.usm_sigma > 0.0:
+            bad("usm_sigma", "must be > 0")
+        if not self.clahe_clip > 0.0:
+            bad("clahe_clip", "must be > 0")
+        if self.clahe_tiles < 1:
+            bad("clahe_tiles", "must be >= 1")
+        if self.auto_downsample < 1:
+            bad("auto_downsample", "must be >= 1")
+        for name in ("auto_dark_mean", "auto_bright_mean", "auto_haze_dark"):
+            if not 0.0 <= getattr(self, name) <= 255.0:
+                bad(name, "must be in [0, 255]")
+        if not self.auto_dark_mean <= self.auto_bright_mean:
+            bad("auto_dark_mean", f"must not exceed auto_bright_mean ({self.auto_bright_mean})")
+        if not self.auto_low_std >= 0.0:
+            bad("auto_low_std", "must be >= 0")
+        if not self.fast_omega > 0.0:
+            bad("fast_omega", "must be > 0")
+        if self.min_keypoints < 0:
+            bad("min_keypoints", "must be >= 0")
