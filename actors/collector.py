@@ -90,20 +90,24 @@ class RunCollector:
 
     def _print_progress(self, force: bool = False) -> None:
         now = time.monotonic()
-        if not self.progress or (not force and now - self._last_print < 0.25):
+        tty = self.stream.isatty()
+        # A terminal gets a live line; a log file gets a line every few seconds.
+        if not self.progress or (not force and now - self._last_print < (0.25 if tty else 5.0)):
             return
         self._last_print = now
         n = len(self.poses)
         lost = sum(p.status == "lost" for p in self.poses.values())
         kfs = sum(p.is_keyframe for p in self.poses.values())
         fps = n / max(now - (self._first_pose_t or now), 1e-6) if n > 1 else 0.0
-        self.stream.write(f"\r  frame {n:5d}/{self.n_frames}  keyframes {kfs:4d}  lost {lost:4d}  {fps:6.1f} fps ")
+        line = f"  frame {n:5d}/{self.n_frames}  keyframes {kfs:4d}  lost {lost:4d}  {fps:6.1f} fps "
+        self.stream.write(f"\r{line}" if tty else f"{line}\n")
         self.stream.flush()
 
     def finish_progress(self) -> None:
         if self.progress and self.poses:
             self._print_progress(force=True)
-            self.stream.write("\n")
+            if self.stream.isatty():
+                self.stream.write("\n")
 
     # -- trajectories --------------------------------------------------------------------
     def keyframe_trajectory(self) -> Trajectory:
@@ -189,7 +193,7 @@ def format_summary(summary: dict, outcome_reason: str, n_cores: int) -> str:
     kitti = m.get("kitti") or {}
     if kitti.get("t_rel_percent") is not None:
         lines.append(f"  KITTI t_rel / r_rel  {kitti['t_rel_percent']:.2f} %   {kitti['r_rel_deg_per_100m']:.3f} deg/100m "
-                     f"(lengths {kitti.get('lengths_used')})")
+                     f"(segments of {', '.join(f'{x:g}' for x in kitti.get('lengths_used') or [])} m)")
     em = m.get("est_motion")
     if em:
         lines.append(f"  estimated motion     {em['translation_m']:.4f} m, {em['rotation_deg']:.3f} deg "

@@ -155,8 +155,8 @@ class _Meter:
         self.peak_rss = 0.0
         self.last = time.monotonic()
 
-    def record(self, service_ms: float, queue_ms: float | None) -> None:
-        self.messages += 1
+    def record(self, service_ms: float, queue_ms: float | None, count: bool = True) -> None:
+        self.messages += int(count)
         self.service.append(service_ms)
         if queue_ms is not None:
             self.queue.append(max(queue_ms, 0.0))
@@ -219,7 +219,10 @@ def actor_main(spec: ActorSpec) -> None:
                 meter.record((time.perf_counter() - t0) * 1e3, (t_recv - sent) * 1e3 if sent else None)
             tick = actor.next_tick_s()
             if tick is not None and tick <= 0:
+                # A producer's work (the source reading a frame) is its service time too.
+                t0 = time.perf_counter()
                 actor.on_tick(ctx)
+                meter.record((time.perf_counter() - t0) * 1e3, None, count=False)
             if time.monotonic() - meter.last >= STATS_PERIOD_S:
                 ctx.publish(meter.stats(spec.name, ctx))
             if os.getppid() != parent:  # supervisor vanished: do not linger as an orphan

@@ -366,6 +366,9 @@ def motion_summary(poses) -> dict:
     }
 
 
+KITTI_MIN_PATH_M = 10.0
+
+
 def evaluate_trajectory(est: Trajectory, gt: Trajectory | None, max_diff: float = 0.01) -> dict:
     """All run metrics in one JSON-ready dict.
 
@@ -392,5 +395,10 @@ def evaluate_trajectory(est: Trajectory, gt: Trajectory | None, max_diff: float 
     out["rpe_frame"] = rpe(e, g, delta=1, unit="frames")
     pairs_m = rpe_pairs(e, 1.0, "m")
     out["rpe_metre"] = rpe(e, g, delta=1.0, unit="m") if len(pairs_m) else None
-    out["kitti"] = kitti_relative_errors(e, g)
+    # KITTI's drift figures only mean something over a real drive.
+    if out["gt_motion"]["path_length_m"] >= KITTI_MIN_PATH_M:
+        out["kitti"] = kitti_relative_errors(e, g)
+    else:
+        out["kitti"] = _kitti_none()
+        out["kitti"]["note"] = f"ground-truth path shorter than {KITTI_MIN_PATH_M} m"
     return out

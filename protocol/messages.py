@@ -120,3 +120,57 @@ class MapSnapshot:
     points: np.ndarray             # (N, 3) float32
     final: bool = False
     timings_ms: dict = field(default_factory=dict)
+
+
+# --- tracking <-> local mapping --------------------------------------------------
+
+@message("keyframe")
+class KeyframeData:
+    """A keyframe as tracking hands it to local mapping.
+
+    Row i describes left keypoint i. ``landmark_ids[i]`` is the existing map landmark the
+    keypoint was matched to (inlier of the pose estimate), -1 for none.
+    ``new_landmark_ids[i]`` is the id tracking reserved for a landmark created from the
+    keypoint's stereo depth (-1 for none): tracking is the only allocator of landmark ids,
+    so it can track the new points before the map update comes back.
+    ``seen_*`` count, per landmark, in how many frames since the previous keyframe it was
+    predicted in view and how many times it was matched (ORB-SLAM's found ratio).
+    """
+
+    index: int
+    timestamp: float
+    T_world_cam: np.ndarray      # (4,4)
+    uv: np.ndarray               # (N,2) float32
+    u_right: np.ndarray          # (N,) float32, -1 where no stereo match
+    depth: np.ndarray            # (N,) float32, -1 where no stereo match
+    descriptors: np.ndarray      # (N,32) uint8
+    octave: np.ndarray           # (N,) int32
+    landmark_ids: np.ndarray     # (N,) int64
+    new_landmark_ids: np.ndarray  # (N,) int64
+    scale_factor: float = 1.2    # ORB pyramid scale: sigma of a measurement = scale**octave
+    restart: bool = False        # first keyframe of a new map segment (start or after "lost")
+    seen_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    seen_visible: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    seen_found: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+
+    def __len__(self) -> int:
+        return len(self.uv)
+
+
+@message("local_map_update")
+class LocalMapUpdate:
+    """What local mapping sends back after inserting keyframe ``keyframe_index``.
+
+    The landmarks are the local map (points seen by the local window); ``keyframe_poses``
+    holds the bundle-adjusted T_world_cam of the window keyframes.
+    """
+
+    keyframe_index: int
+    landmark_ids: np.ndarray     # (M,) int64
+    positions: np.ndarray        # (M,3) float64
+    descriptors: np.ndarray      # (M,32) uint8
+    keyframe_poses: dict[int, np.ndarray] = field(default_factory=dict)
+    timings: dict[str, float] = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.landmark_ids)

@@ -1,0 +1,117 @@
+"""Tracking actor: enhanced frame → pose (and sometimes a keyframe).
+
+A thin loop around ``canopy.frontend.Tracker``. It keeps the tracker's
+local-map view fresh with the updates local mapping sends back; in lockstep
+it waits for the update that answers each keyframe before the next frame, so
+runs are repeatable. Each frame's pose goes to the supervisor together with
+its pose relative to the reference keyframe, so later corrections of that
+keyframe carry over to the frame.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from actors.runtime import Actor, ActorContext
+from canopy.enhance import adaptive_fast_threshold
+from canopy.frontend import Tracker
+from protocol.messages import EndOfStream, FrameDone, FrameHandle, FramePose, KeyframeData, LocalMapUpdate
+from shared.errors import CanopyError
+from shared.ring import FrameRing, SlotOverwritten
+from shared.types import StereoFrame
+
+# AFE's adaptive FAST threshold belongs with the enhancement it was designed for.
+ADAPTIVE_FAST_METHODS = ("afe", "auto")
+
+
+class TrackingActor(Actor):
+    name = "tracking"
+
+    def setup(self, ctx: ActorContext) -> None:
+        c = self.config
+        self.ring = FrameRing.attach(c["ring"])
+        self.tracker = Tracker(c["calib"], c["params"])
+        self.lockstep = c["clock"] == "lockstep"
+        self.wait_s = float(c.get("lockstep_wait_s", 60.0))
+        enh = c.get("enhancement")
+        self.adaptive_fast = bool(enh is not None and getattr(enh, "adaptive_fast", False)
+                                  and enh.method in ADAPTIVE_FAST_METHODS)
+        self.fast_omega = float(getattr(enh, "fast_omega", 128.0)) if enh is not None else 128.0
+        self.kf_poses: dict[int, np.ndarray] = {}
+        self.counts = {"ok": 0, "lost": 0, "init": 0, "keyframes": 0}
+
+    def _apply_update(self, update: LocalMapUpdate) -> None:
+        self.tracker.apply_map_update(update)
+        for idx, T in update.keyframe_poses.items():
+            self.kf_poses[int(idx)] = np.asarray(T)
+
+    def on_message(self, msg, ctx: ActorContext) -> None:
+        if isinstance(msg, LocalMapUpdate):
+            self._apply_update(msg)
+            return
+        if isinstance(msg, EndOfStream):
+            ctx.send("local_mapping", EndOfStream(n_frames=msg.n_frames, sent_at=time.time()))
+            ctx.stop()
+            return
+        if not isinstance(msg, FrameHandle):
+            return
+        end = None
+        if not self.lockstep:
+            # Realtime: apply every pending map update, track only the newest frame.
+            for newer in ctx.drain_inbox():
+                if isinstance(newer, LocalMapUpdate):
+                    self._apply_update(newer)
+                elif isinstance(newer, FrameHandle):
+                    ctx.dropped += 1
+                    msg = newer
+                elif isinstance(newer, EndOfStream):
+                    end = newer
+        try:
+            index, stamp, (left, right) = self.ring.read(msg.slot, msg.generation)
+        except SlotOverwritten:
+            ctx.dropped += 1
+        else:
+            self._track(StereoFrame(index, stamp, left, right), msg, ctx)
+        if end is not None:
+            self.on_message(end, ctx)
+
+    def _track(self, frame: StereoFrame, handle: FrameHandle, ctx: ActorContext) -> None:
+        fast = adaptive_fast_threshold(frame.left, self.fast_omega) if self.adaptive_fast else None
+        res = self.tracker.track(frame, fast_threshold=fast)
+        self.counts[res.status] = self.counts.get(res.status, 0) + 1
+        if res.is_keyframe:
+            self.counts["keyframes"] += 1
+            self.kf_poses[res.index] = res.T_world_cam
+            ctx.send("local_mapping", res.keyframe)
+            if self.lockstep:
+                self._wait_for_update(res.index, ctx)
+        ref = res.reference_kf_index
+        T_w_ref = self.kf_poses.get(ref)
+        T_ref_cam = np.linalg.inv(T_w_ref) @ res.T_world_cam if T_w_ref is not None else np.eye(4)
+        timings = {k: float(v) for k, v in res.timings.items()}
+        if "enhance_ms" in handle.info:
+            timings["enhance"] = float(handle.info["enhance_ms"])
+        ctx.publish(FramePose(index=res.index, timestamp=res.timestamp, T_world_cam=res.T_world_cam,
+                              status=res.status, n_inliers=int(res.n_inliers), n_matches=int(res.n_matches),
+                              is_keyframe=bool(res.is_keyframe), ref_keyframe=int(ref if T_w_ref is not None else -1),
+                              T_ref_cam=T_ref_cam, timings_ms=timings, sent_at=time.time()))
+        ctx.extra.update(self.counts)
+        if self.lockstep:
+            ctx.send("source", FrameDone(index=res.index, sent_at=time.time()))
+
+    def _wait_for_update(self, kf_index: int, ctx: ActorContext) -> None:
+        deadline = time.monotonic() + self.wait_s
+        while time.monotonic() < deadline:
+            msg = ctx.recv_inbox(100)
+            if isinstance(msg, LocalMapUpdate):
+                self._apply_update(msg)
+                if msg.keyframe_index == kf_index:
+                    return
+            elif msg is not None:
+                raise CanopyError(f"tracking: unexpected {type(msg).__name__} while waiting for the map "
+                                  f"update of keyframe {kf_index}")
+        raise CanopyError(f"tracking: no map update for keyframe {kf_index} within {self.wait_s:.0f} s")
+
+    def teardown(self, ctx: ActorContext) -> None:
+        self.ring.close()

@@ -1,0 +1,53 @@
+"""Typed parameters of local mapping (YAML section ``mapping``)."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from shared.errors import ConfigError
+
+CHI2_95_2DOF = 5.991  # chi-square 95% quantiles (ORB-SLAM's outlier tests)
+CHI2_95_3DOF = 7.815
+
+
+@dataclass(frozen=True)
+class MappingParams:
+    window_size: int = 8                 # local keyframes optimised by local BA (AGRI §3.3.2)
+    covisibility_min_shared: int = 15    # landmarks two keyframes must share to be neighbours
+    ba_iterations: int = 10              # Levenberg-Marquardt iterations per BA pass
+    ba_passes: int = 2                   # ORB-SLAM: robust pass, drop outliers, refine again
+    pixel_sigma: float = 1.0             # px at octave 0; sigma = pixel_sigma * scale**octave
+    huber_stereo: float = math.sqrt(CHI2_95_3DOF)  # robust kernel widths (whitened units)
+    huber_mono: float = math.sqrt(CHI2_95_2DOF)
+    chi2_stereo: float = CHI2_95_3DOF    # observation outlier thresholds after BA
+    chi2_mono: float = CHI2_95_2DOF
+    min_observations: int = 2            # keyframes that must see a landmark once it is old enough
+    cull_age_keyframes: int = 2          # keyframes after creation before the test above applies
+    recent_age_keyframes: int = 3        # older landmarks have survived and are no longer culled so
+    min_found_ratio: float = 0.25        # found / visible (ORB-SLAM MapPointCulling)
+    min_depth: float = 0.05              # m; landmarks behind or on a camera are dropped
+    fixed_pose_sigma: float = 1e-6       # prior sigma holding fixed keyframes (rad, m)
+
+    def validate(self) -> "MappingParams":
+        def need(ok: bool, name: str, what: str) -> None:
+            if not ok:
+                raise ConfigError("MappingParams", f"{name} {what} (got {getattr(self, name)!r})")
+
+        need(self.window_size >= 2, "window_size", "must be >= 2")
+        need(self.covisibility_min_shared >= 1, "covisibility_min_shared", "must be >= 1")
+        need(self.ba_iterations >= 1, "ba_iterations", "must be >= 1")
+        need(self.ba_passes >= 1, "ba_passes", "must be >= 1")
+        need(self.pixel_sigma > 0, "pixel_sigma", "must be > 0")
+        need(self.huber_stereo > 0 and self.huber_mono > 0, "huber_stereo", "and huber_mono must be > 0")
+        need(self.chi2_stereo > 0 and self.chi2_mono > 0, "chi2_stereo", "and chi2_mono must be > 0")
+        need(self.min_observations >= 1, "min_observations", "must be >= 1")
+        need(self.cull_age_keyframes >= 1, "cull_age_keyframes", "must be >= 1")
+        need(self.recent_age_keyframes >= self.cull_age_keyframes, "recent_age_keyframes",
+             "must be >= cull_age_keyframes")
+        need(0 <= self.min_found_ratio <= 1, "min_found_ratio", "must be in [0, 1]")
+        need(self.min_depth > 0, "min_depth", "must be > 0")
+        need(self.fixed_pose_sigma > 0, "fixed_pose_sigma", "must be > 0")
+        return self
+
+    def __post_init__(self):
+        self.validate()

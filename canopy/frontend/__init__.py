@@ -1,0 +1,9 @@
+"""Tracking front end (AGRI-SLAM §3.2): ORB, stereo matching, map tracking, keyframes."""
+from canopy.frontend.features import Features, OrbExtractor
+from canopy.frontend.messages import KeyframeData, LocalMapUpdate, TrackingResult
+from canopy.frontend.params import TrackingParams
+from canopy.frontend.stereo import StereoMatches, match_stereo
+from canopy.frontend.tracker import STATUS_INIT, STATUS_LOST, STATUS_OK, Tracker
+
+__all__ = ["Features", "OrbExtractor", "KeyframeData", "LocalMapUpdate", "TrackingResult", "TrackingParams",
+           "StereoMatches", "match_stereo", "Tracker", "STATUS_INIT", "STATUS_OK", "STATUS_LOST"]

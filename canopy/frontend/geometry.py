@@ -1,0 +1,124 @@
+"""SE(3) helpers, stereo projection (AGRI Eq. 8), its pose Jacobian, pose covariance and
+the differential entropy of AGRI Eq. 6.
+
+Pose perturbations use GTSAM's tangent ordering xi = (omega, v) and act on the left of
+``T_cam_world``: ``T <- exp(xi) @ T``. det(Sigma) is invariant under the SE(3) adjoint
+(det Ad = det(R)^2 = 1), so the entropy does not depend on this choice.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from shared.types import StereoCalibration
+
+_LOG_2PI_E = float(np.log(2.0 * np.pi * np.e))
+
+
+def skew(w: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+
+
+def so3_exp(w: np.ndarray) -> np.ndarray:
+    theta = float(np.linalg.norm(w))
+    W = skew(w)
+    if theta < 1e-10:
+        return np.eye(3) + W
+    return np.eye(3) + np.sin(theta) / theta * W + (1.0 - np.cos(theta)) / theta**2 * W @ W
+
+
+def se3_exp(xi: np.ndarray) -> np.ndarray:
+    """exp of xi = (omega, v) as a 4x4 matrix."""
+    w, v = np.asarray(xi[:3], float), np.asarray(xi[3:], float)
+    theta = float(np.linalg.norm(w))
+    W = skew(w)
+    if theta < 1e-10:
+        V = np.eye(3) + 0.5 * W
+    else:
+        V = np.eye(3) + (1 - np.cos(theta)) / theta**2 * W + (theta - np.sin(theta)) / theta**3 * W @ W
+    T = np.eye(4)
+    T[:3, :3] = so3_exp(w)
+    T[:3, 3] = V @ v
+    return T
+
+
+def se3_inv(T: np.ndarray) -> np.ndarray:
+    Ti = np.eye(4)
+    R = T[:3, :3]
+    Ti[:3, :3] = R.T
+    Ti[:3, 3] = -R.T @ T[:3, 3]
+    return Ti
+
+
+def rotation_angle(R: np.ndarray) -> float:
+    return float(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)))
+
+
+def pose_from_rvec(rvec: np.ndarray, tvec: np.ndarray) -> np.ndarray:
+    """OpenCV (rvec, tvec) of T_cam_world as a 4x4 matrix."""
+    import cv2
+
+    T = np.eye(4)
+    T[:3, :3] = cv2.Rodrigues(np.asarray(rvec, float).reshape(3, 1))[0]
+    T[:3, 3] = np.asarray(tvec, float).reshape(3)
+    return T
+
+
+def transform(T: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """Apply a 4x4 pose to (N,3) points."""
+    return X @ T[:3, :3].T + T[:3, 3]
+
+
+def project_stereo(T_cw: np.ndarray, X_w: np.ndarray, calib: StereoCalibration) -> tuple[np.ndarray, np.ndarray]:
+    """AGRI Eq. 8: (u_left, v, u_right) of world points, and their camera-frame coordinates."""
+    Pc = transform(T_cw, X_w)
+    z = Pc[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv_z = 1.0 / z
+        u = calib.fx * Pc[:, 0] * inv_z + calib.cx
+        v = calib.fy * Pc[:, 1] * inv_z + calib.cy
+        ur = u - calib.bf * inv_z
+    return np.stack([u, v, ur], axis=1), Pc
+
+
+def stereo_pose_jacobian(Pc: np.ndarray, calib: StereoCalibration) -> np.ndarray:
+    """(N,3,6) Jacobian of (u_l, v, u_r) w.r.t. the left perturbation xi = (omega, v) of T_cam_world.
+
+    dPc/dxi = [-[Pc]x | I]; d(u,v,ur)/dPc from Eq. 8 (ORB-SLAM's EdgeStereoSE3ProjectXYZOnlyPose).
+    """
+    x, y, z = Pc[:, 0], Pc[:, 1], Pc[:, 2]
+    iz = 1.0 / z
+    iz2 = iz * iz
+    n = len(Pc)
+    Jp = np.zeros((n, 3, 3))
+    Jp[:, 0, 0] = calib.fx * iz
+    Jp[:, 0, 2] = -calib.fx * x * iz2
+    Jp[:, 1, 1] = calib.fy * iz
+    Jp[:, 1, 2] = -calib.fy * y * iz2
+    Jp[:, 2, 0] = calib.fx * iz
+    Jp[:, 2, 2] = -calib.fx * (x - calib.baseline) * iz2
+    dP = np.zeros((n, 3, 6))
+    # -[Pc]x
+    dP[:, 0, 1], dP[:, 0, 2] = z, -y
+    dP[:, 1, 0], dP[:, 1, 2] = -z, x
+    dP[:, 2, 0], dP[:, 2, 1] = y, -x
+    dP[:, 0, 3] = dP[:, 1, 4] = dP[:, 2, 5] = 1.0
+    return Jp @ dP
+
+
+def pose_information(J: np.ndarray, sigma: np.ndarray, has_right: np.ndarray) -> np.ndarray:
+    """Fisher information J^T Σ^-1 J of the pose from (N,3,6) stereo Jacobians.
+
+    Rows for u_right are dropped where the measurement has no stereo match.
+    """
+    w = np.repeat((1.0 / np.asarray(sigma, float) ** 2)[:, None], 3, axis=1)
+    w[:, 2] *= np.asarray(has_right, float)
+    return np.einsum("nki,nk,nkj->ij", J, w, J)
+
+
+def differential_entropy(cov: np.ndarray) -> float:
+    """AGRI Eq. 6 for m = 6: h = 0.5 ln((2 pi e)^6 |Sigma|) = 3 (1 + ln 2pi) + 0.5 ln|Sigma|."""
+    sign, logdet = np.linalg.slogdet(cov)
+    if sign <= 0:
+        return float("inf")
+    m = cov.shape[0]
+    return 0.5 * (m * _LOG_2PI_E + logdet)

@@ -1,0 +1,174 @@
+"""Vectorised binary-descriptor matching primitives.
+
+Candidate generation never forms the full N x M product: references are sorted by
+image row, each query gets a contiguous row band via ``searchsorted``, and the bands
+are flattened into (query, reference) pairs with ``np.repeat``. Hamming distances of
+the surviving pairs are computed in one batch (XOR + popcount on uint64 words).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+if hasattr(np, "bitwise_count"):
+    def _popcount64(x: np.ndarray) -> np.ndarray:
+        return np.bitwise_count(x)
+else:  # numpy < 2.0: 256-entry byte lookup table
+    _LUT = np.array([bin(i).count("1") for i in range(256)], dtype=np.uint8)
+
+    def _popcount64(x: np.ndarray) -> np.ndarray:
+        return _LUT[x.view(np.uint8)].reshape(*x.shape, 8).sum(-1)
+
+DESCRIPTOR_BYTES = 32
+
+
+def as_words(desc: np.ndarray) -> np.ndarray:
+    """(N,32) uint8 ORB descriptors viewed as (N,4) uint64 words."""
+    d = np.ascontiguousarray(desc, dtype=np.uint8).reshape(-1, DESCRIPTOR_BYTES)
+    return d.view(np.uint64)
+
+
+def hamming_pairs(words_a: np.ndarray, words_b: np.ndarray, ia: np.ndarray, ib: np.ndarray) -> np.ndarray:
+    """Hamming distance between rows words_a[ia] and words_b[ib] (int32)."""
+    if len(ia) == 0:
+        return np.zeros(0, np.int32)
+    return _popcount64(words_a[ia] ^ words_b[ib]).sum(axis=1, dtype=np.int32)
+
+
+def band_pairs(q_lo: np.ndarray, q_hi: np.ndarray, ref_key_sorted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """All (query i, sorted-reference j) with q_lo[i] <= ref_key_sorted[j] <= q_hi[i].
+
+    Returns query indices and positions in the sorted reference array.
+    """
+    lo = np.searchsorted(ref_key_sorted, q_lo, side="left")
+    hi = np.searchsorted(ref_key_sorted, q_hi, side="right")
+    counts = np.maximum(hi - lo, 0)
+    total = int(counts.sum())
+    if total == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    qi = np.repeat(np.arange(len(q_lo)), counts)
+    starts = np.repeat(lo - np.cumsum(counts) + counts, counts)
+    rj = starts + np.arange(total)
+    return qi, rj
+
+
+def best_two(qi: np.ndarray, rj: np.ndarray, dist: np.ndarray, n_query: int):
+    """Per query: best reference, its distance and the second-best distance.
+
+    Returns (best_ref (n_query,) int64 with -1 where none, best_dist, second_dist) where
+    missing distances are a large sentinel (1 << 20).
+    """
+    big = 1 << 20
+    best_ref = np.full(n_query, -1, np.int64)
+    best_d = np.full(n_query, big, np.int64)
+    second_d = np.full(n_query, big, np.int64)
+    if len(qi) == 0:
+        return best_ref, best_d, second_d
+    order = np.lexsort((dist, qi))
+    qs, ds, rs = qi[order], dist[order], rj[order]
+    first = np.ones(len(qs), bool)
+    first[1:] = qs[1:] != qs[:-1]
+    fidx = np.flatnonzero(first)
+    best_ref[qs[fidx]] = rs[fidx]
+    best_d[qs[fidx]] = ds[fidx]
+    nxt = fidx + 1
+    has_second = nxt < len(qs)
+    has_second[has_second] = qs[nxt[has_second]] == qs[fidx[has_second]]
+    second_d[qs[fidx[has_second]]] = ds[nxt[has_second]]
+    return best_ref, best_d, second_d
+
+
+def unique_by_reference(query_idx: np.ndarray, ref_idx: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """Boolean mask keeping, for every reference used by several queries, only the closest."""
+    if len(query_idx) == 0:
+        return np.zeros(0, bool)
+    order = np.lexsort((dist, ref_idx))
+    keep_sorted = np.ones(len(order), bool)
+    r = ref_idx[order]
+    keep_sorted[1:] = r[1:] != r[:-1]
+    keep = np.zeros(len(order), bool)
+    keep[order[keep_sorted]] = True
+    return keep
+
+
+def grid_pairs(q_uv: np.ndarray, r_uv: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
+    """(query, reference) pairs whose grid cells (side ``cell``) are 8-neighbours.
+
+    References are sorted by cell id = row * n_cols + col, so the three cells of one grid
+    row around a query are one contiguous key range: three ``band_pairs`` calls cover the
+    3x3 neighbourhood, which contains every reference within ``cell`` of the query.
+    """
+    cell = max(cell, 1.0)
+    lo_uv = np.minimum(q_uv.min(axis=0), r_uv.min(axis=0))
+    n_cols = int((max(q_uv[:, 0].max(), r_uv[:, 0].max()) - lo_uv[0]) // cell) + 3
+    rc = ((r_uv - lo_uv) // cell).astype(np.int64)
+    rkey = rc[:, 1] * n_cols + rc[:, 0]
+    order = np.argsort(rkey, kind="stable")
+    rkey_sorted = rkey[order]
+    qc = ((q_uv - lo_uv) // cell).astype(np.int64)
+    col_lo = np.maximum(qc[:, 0] - 1, 0)
+    col_hi = qc[:, 0] + 1
+    qis, rjs = [], []
+    for dy in (-1, 0, 1):
+        row = qc[:, 1] + dy
+        lo = np.where(row >= 0, row * n_cols + col_lo, 1)
+        hi = np.where(row >= 0, row * n_cols + col_hi, 0)
+        qi, rpos = band_pairs(lo, hi, rkey_sorted)
+        qis.append(qi)
+        rjs.append(order[rpos])
+    return np.concatenate(qis), np.concatenate(rjs)
+
+
+def match_in_window(q_uv: np.ndarray, q_words: np.ndarray, q_radius: np.ndarray,
+                    r_uv: np.ndarray, r_words: np.ndarray, max_hamming: int, ratio: float,
+                    q_mask: np.ndarray | None = None, r_scale: np.ndarray | None = None):
+    """Match each query (e.g. a projected landmark) to the reference keypoint inside a circle.
+
+    Candidates come from the 3x3 grid cells around the query, then a circle test; best Hamming
+    distance <= max_hamming with best < ratio * second (Lowe ratio, as ORB-SLAM's
+    SearchByProjection); each reference keypoint is kept for its closest query only.
+    ``r_scale`` optionally widens the circle per reference keypoint (its octave scale, as
+    ORB-SLAM scales the search window with the pyramid level).
+    Returns (query indices, reference indices, distances).
+    """
+    n_q = len(q_uv)
+    empty = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64))
+    if n_q == 0 or len(r_uv) == 0:
+        return empty
+    if q_mask is not None:
+        sel = np.flatnonzero(q_mask)
+    else:
+        sel = np.arange(n_q)
+    if len(sel) == 0:
+        return empty
+    qi, rj = grid_pairs(q_uv[sel], r_uv, float(np.max(q_radius[sel])) * (1.0 if r_scale is None else float(np.max(r_scale))))
+    qi = sel[qi]
+    d2 = ((q_uv[qi] - r_uv[rj]) ** 2).sum(axis=1)
+    rad = q_radius[qi] if r_scale is None else q_radius[qi] * r_scale[rj]
+    ok = d2 <= rad**2
+    qi, rj = qi[ok], rj[ok]
+    dist = hamming_pairs(q_words, r_words, qi, rj)
+    best_ref, best_d, second_d = best_two(qi, rj, dist, n_q)
+    good = (best_ref >= 0) & (best_d <= max_hamming) & (best_d < ratio * second_d)
+    qsel = np.flatnonzero(good)
+    rsel = best_ref[qsel]
+    dsel = best_d[qsel]
+    keep = unique_by_reference(qsel, rsel, dsel)
+    return qsel[keep], rsel[keep], dsel[keep]
+
+
+def knn_match(q_desc: np.ndarray, r_desc: np.ndarray, max_hamming: int, ratio: float):
+    """Brute-force Hamming matching with Lowe's ratio test (OpenCV BFMatcher, k = 2), each
+    reference used once. For when no pose prediction is available."""
+    import cv2
+
+    empty = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64))
+    if len(q_desc) < 2 or len(r_desc) < 2:
+        return empty
+    knn = cv2.BFMatcher(cv2.NORM_HAMMING).knnMatch(np.ascontiguousarray(q_desc), np.ascontiguousarray(r_desc), k=2)
+    arr = np.array([(m[0].queryIdx, m[0].trainIdx, m[0].distance, m[1].distance) for m in knn if len(m) == 2])
+    if len(arr) == 0:
+        return empty
+    good = (arr[:, 2] <= max_hamming) & (arr[:, 2] < ratio * arr[:, 3])
+    q, r, d = arr[good, 0].astype(np.int64), arr[good, 1].astype(np.int64), arr[good, 2].astype(np.int64)
+    keep = unique_by_reference(q, r, d)
+    return q[keep], r[keep], d[keep]

@@ -1,0 +1,35 @@
+"""Tracking's per-frame result.
+
+The data exchanged between tracking and local mapping (``KeyframeData``,
+``LocalMapUpdate``) are wire messages and are defined once, in
+``protocol.messages``; they are re-exported here for the algorithms.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+from protocol.messages import KeyframeData, LocalMapUpdate  # noqa: F401  (re-export)
+
+
+@dataclass
+class TrackingResult:
+    index: int
+    timestamp: float
+    T_world_cam: np.ndarray
+    status: str                  # "init" | "ok" | "lost"
+    n_inliers: int
+    n_matches: int
+    is_keyframe: bool
+    keyframe: KeyframeData | None
+    reference_kf_index: int      # keyframe this frame's pose is expressed against (-1 if none)
+    timings: dict[str, float] = field(default_factory=dict)
+    pose_covariance: np.ndarray | None = None
+    entropy: float | None = None        # AGRI Eq. 6 of this frame's pose estimate
+    entropy_ratio: float | None = None  # AGRI Eq. 7, alpha for this frame
+    n_stereo: int = 0
+    # pose relative to the reference keyframe as tracking knew it (ORB-SLAM's relative frame
+    # pose); with the keyframe's final pose it gives the frame's final pose. None when lost.
+    T_ref_cam: np.ndarray | None = None

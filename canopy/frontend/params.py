@@ -1,0 +1,123 @@
+"""Typed parameters of the tracking front end (one frozen dataclass, YAML section ``tracking``).
+
+Defaults follow ORB-SLAM2's stereo settings and AGRI-SLAM §3.2 (entropy-ratio
+threshold α = 0.8 of Eq. 7). Build from YAML with
+``shared.params.params_from_mapping(TrackingParams, section, source)``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from shared.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class TrackingParams:
+    # --- ORB extraction (AGRI §3.2.1; ORB-SLAM2 ORBextractor defaults) -------------
+    n_features: int = 1000
+    scale_factor: float = 1.2
+    n_levels: int = 8
+    fast_threshold: int = 20
+    edge_threshold: int = 19            # border (px) where ORB cannot describe a corner
+    patch_size: int = 31                # ORB descriptor patch (px)
+    # Grid bucketing: detect n_features * oversample corners, then keep the strongest
+    # ones cell by cell so that features spread over the image (ORB-SLAM's grid idea).
+    grid_cols: int = 16
+    grid_rows: int = 8
+    oversample: float = 1.6
+
+    # --- stereo matching on rectified rows (AGRI §3.2.2; ORB-SLAM2 ComputeStereoMatches)
+    stereo_max_hamming: int = 75        # (TH_HIGH + TH_LOW) / 2 of ORB-SLAM2
+    stereo_ratio: float = 0.8           # best / second-best Hamming distance
+    min_disparity: float = 0.5          # px; farther points carry no depth
+    max_disparity_fraction: float = 0.5 # max disparity as a fraction of the image width
+    row_tolerance: float = 2.0          # px at octave 0, scaled by scale_factor**octave
+    octave_tolerance: int = 1           # right keypoint may sit one pyramid level away
+    subpixel_window: int = 5            # half size of the SAD patch (11x11 as ORB-SLAM2)
+    subpixel_search: int = 5            # SAD search +/- px around the descriptor match
+    sad_outlier_factor: float = 2.1     # reject SAD > factor * median (1.5 * 1.4 in ORB-SLAM2)
+
+    # --- temporal matching against the local map -----------------------------------
+    # Stage 1 (ORB-SLAM TrackWithMotionModel): project the local map with the constant-velocity
+    # prediction and search a circle; widen once when too few; without a usable prediction,
+    # brute-force descriptor matching (TrackReferenceKeyFrame's role; ratio test + RANSAC).
+    search_radius: float = 15.0         # px around the predicted projection
+    search_radius_wide: float = 40.0    # second attempt when the first finds too few
+    # Stage 2 (ORB-SLAM TrackLocalMap): re-project the whole local map with the RANSAC pose
+    # and search a small circle, then refine the pose on all those matches.
+    search_radius_local: float = 4.0    # px at octave 0, scaled by the keypoint's scale
+    map_max_hamming: int = 75
+    map_ratio: float = 0.8
+    # Landmarks are created from stereo points closer than max_depth_baselines * baseline
+    # (there is no two-view triangulation here, so far points are kept too: the stereo
+    # factor's disparity noise weights them correctly in BA). "Close" points, as ORB-SLAM's
+    # ThDepth, drive the keyframe condition on tracked close points.
+    max_depth_baselines: float = 150.0
+    close_depth_baselines: float = 40.0
+
+    # --- motion estimation (AGRI §3.2.3: EPnP in RANSAC, then motion-only refinement)
+    pnp_reprojection_error: float = 3.0  # px, RANSAC inlier threshold
+    pnp_iterations: int = 100
+    pnp_confidence: float = 0.999
+    min_inliers: int = 15
+    pixel_sigma: float = 1.0            # px at octave 0 (measurement sigma = pixel_sigma * scale**octave)
+    # Motion-only refinement after RANSAC (ORB-SLAM's PoseOptimization): rounds of
+    # Gauss-Newton on stereo reprojection errors with a Huber kernel, re-classifying
+    # outliers by chi-square after each round (95% quantiles, 2 and 3 DoF).
+    pose_opt_rounds: int = 4
+    pose_opt_iterations: int = 10
+    chi2_mono: float = 5.991
+    chi2_stereo: float = 7.815
+    seed: int = 0                       # RANSAC seed; frame index is added per call
+
+    # --- keyframe selection (AGRI §3.2.4, Eq. 6-7; Kerl et al. 2013) ---------------
+    entropy_ratio_alpha: float = 0.8
+    min_frames_between_keyframes: int = 0
+    max_frames_between_keyframes: int = 20
+    min_tracked_fraction: float = 0.75  # of the reference keyframe's tracked landmarks
+    min_new_close_points: int = 70      # ORB-SLAM stereo: insert when few close points tracked
+    min_tracked_close: int = 100
+    min_init_points: int = 100          # stereo points needed to (re)start a map
+
+    def validate(self) -> "TrackingParams":
+        def need(ok: bool, name: str, what: str) -> None:
+            if not ok:
+                raise ConfigError("TrackingParams", f"{name} {what} (got {getattr(self, name)!r})")
+
+        need(self.n_features > 0, "n_features", "must be > 0")
+        need(self.scale_factor > 1.0, "scale_factor", "must be > 1")
+        need(1 <= self.n_levels <= 16, "n_levels", "must be in [1, 16]")
+        need(0 < self.fast_threshold < 255, "fast_threshold", "must be in (0, 255)")
+        need(self.grid_cols > 0 and self.grid_rows > 0, "grid_cols", "and grid_rows must be > 0")
+        need(self.oversample >= 1.0, "oversample", "must be >= 1")
+        need(0 <= self.stereo_max_hamming <= 256, "stereo_max_hamming", "must be in [0, 256]")
+        need(0 < self.stereo_ratio <= 1, "stereo_ratio", "must be in (0, 1]")
+        need(self.min_disparity > 0, "min_disparity", "must be > 0")
+        need(0 < self.max_disparity_fraction <= 1, "max_disparity_fraction", "must be in (0, 1]")
+        need(self.row_tolerance >= 0, "row_tolerance", "must be >= 0")
+        need(self.subpixel_window >= 1, "subpixel_window", "must be >= 1")
+        need(self.subpixel_search >= 1, "subpixel_search", "must be >= 1")
+        need(self.search_radius > 0, "search_radius", "must be > 0")
+        need(self.search_radius_wide >= self.search_radius, "search_radius_wide", "must be >= search_radius")
+        need(self.search_radius_local > 0, "search_radius_local", "must be > 0")
+        need(0 < self.map_ratio <= 1, "map_ratio", "must be in (0, 1]")
+        need(self.max_depth_baselines > 0, "max_depth_baselines", "must be > 0")
+        need(self.close_depth_baselines > 0, "close_depth_baselines", "must be > 0")
+        need(self.pnp_reprojection_error > 0, "pnp_reprojection_error", "must be > 0")
+        need(self.pnp_iterations > 0, "pnp_iterations", "must be > 0")
+        need(0 < self.pnp_confidence < 1, "pnp_confidence", "must be in (0, 1)")
+        need(self.min_inliers >= 6, "min_inliers", "must be >= 6 (a pose has 6 DoF)")
+        need(self.pixel_sigma > 0, "pixel_sigma", "must be > 0")
+        need(self.pose_opt_rounds >= 1, "pose_opt_rounds", "must be >= 1")
+        need(self.pose_opt_iterations >= 1, "pose_opt_iterations", "must be >= 1")
+        need(self.chi2_mono > 0 and self.chi2_stereo > 0, "chi2_mono", "and chi2_stereo must be > 0")
+        need(0 < self.entropy_ratio_alpha < 1, "entropy_ratio_alpha", "must be in (0, 1)")
+        need(self.min_frames_between_keyframes >= 0, "min_frames_between_keyframes", "must be >= 0")
+        need(self.max_frames_between_keyframes > self.min_frames_between_keyframes,
+             "max_frames_between_keyframes", "must exceed min_frames_between_keyframes")
+        need(0 < self.min_tracked_fraction <= 1, "min_tracked_fraction", "must be in (0, 1]")
+        need(self.min_init_points >= self.min_inliers, "min_init_points", "must be >= min_inliers")
+        return self
+
+    def __post_init__(self):
+        self.validate()

@@ -1,0 +1,140 @@
+"""Stereo matching on rectified images (AGRI §3.2.2), after ORB-SLAM2's ComputeStereoMatches.
+
+For every left keypoint: right keypoints on the same row band (± row_tolerance scaled by
+the octave), with a neighbouring octave and a disparity in [min, max]; best Hamming
+distance with a ratio test to the second best; each right keypoint used once; then
+sub-pixel refinement of u_right by SAD patch correlation along the row on the keypoint's
+pyramid level with a parabola fit through the three costs around the minimum; finally
+matches whose SAD exceeds ``sad_outlier_factor`` times the median are rejected.
+All steps are batched numpy (candidate pairs via row bands, one loop over pyramid levels).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from canopy.frontend.features import Features
+from canopy.frontend.matching import as_words, band_pairs, best_two, hamming_pairs, unique_by_reference
+from canopy.frontend.params import TrackingParams
+from shared.types import StereoCalibration
+
+
+@dataclass
+class StereoMatches:
+    """Per left keypoint: refined right-image column and depth, -1 where unmatched."""
+
+    u_right: np.ndarray  # (N,) float32
+    depth: np.ndarray    # (N,) float32
+    n_candidates: int = 0
+
+    @property
+    def valid(self) -> np.ndarray:
+        return self.depth > 0
+
+
+def image_pyramid(image: np.ndarray, scale_factors: np.ndarray, levels: np.ndarray) -> dict[int, np.ndarray]:
+    """Resized images for the requested levels (level 0 is the image itself)."""
+    h, w = image.shape[:2]
+    out = {}
+    for lvl in levels:
+        s = scale_factors[lvl]
+        out[int(lvl)] = image if lvl == 0 else cv2.resize(
+            image, (int(round(w / s)), int(round(h / s))), interpolation=cv2.INTER_LINEAR)
+    return out
+
+
+def subpixel_refine(left_img: np.ndarray, right_img: np.ndarray, uvl: np.ndarray, ur: np.ndarray,
+                    octave: np.ndarray, scale_factors: np.ndarray, half_window: int, search: int):
+    """SAD correlation of an (2w+1)^2 patch along the row, parabola fit of the minimum.
+
+    Returns refined u_right (level-0 px), the SAD at the minimum and a validity mask.
+    Each patch has its centre intensity subtracted (ORB-SLAM2's illumination normalisation).
+    """
+    k = len(uvl)
+    u_out = np.full(k, -1.0, np.float64)
+    sad_out = np.full(k, np.inf)
+    ok_out = np.zeros(k, bool)
+    if k == 0:
+        return u_out, sad_out, ok_out
+    w, L = half_window, search
+    levels = np.unique(octave)
+    pyr_l = image_pyramid(left_img, scale_factors, levels)
+    pyr_r = image_pyramid(right_img, scale_factors, levels)
+    dw = np.arange(-w, w + 1)
+    strip = np.arange(-L - w, L + w + 1)
+    for lvl in levels:
+        sel = np.flatnonzero(octave == lvl)
+        s = scale_factors[lvl]
+        il, ir = pyr_l[int(lvl)], pyr_r[int(lvl)]
+        hh, ww = il.shape
+        xl = np.round(uvl[sel, 0] / s).astype(np.int64)
+        yl = np.round(uvl[sel, 1] / s).astype(np.int64)
+        xr0 = np.round(ur[sel] / s).astype(np.int64)
+        inside = ((yl - w >= 0) & (yl + w < hh) & (xl - w >= 0) & (xl + w < ww)
+                  & (xr0 - L - w >= 0) & (xr0 + L + w < ww))
+        sel, xl, yl, xr0 = sel[inside], xl[inside], yl[inside], xr0[inside]
+        if len(sel) == 0:
+            continue
+        rows = (yl[:, None] + dw[None, :])[:, :, None]                       # (K,P,1)
+        patch_l = il[rows, (xl[:, None] + dw[None, :])[:, None, :]].astype(np.float32)
+        patch_l -= patch_l[:, w:w + 1, w:w + 1]
+        band = ir[rows, (xr0[:, None] + strip[None, :])[:, None, :]].astype(np.float32)  # (K,P,2L+2w+1)
+        win = np.lib.stride_tricks.sliding_window_view(band, 2 * w + 1, axis=2)  # (K,P,2L+1,P)
+        centre = band[:, w, w:w + 2 * L + 1]  # centre pixel of the window at each shift (K,2L+1)
+        sad = np.abs(win - centre[:, None, :, None] - patch_l[:, :, None, :]).sum(axis=(1, 3))  # (K,2L+1)
+        best = np.argmin(sad, axis=1)
+        interior = (best > 0) & (best < 2 * L)
+        idx = np.arange(len(sel))
+        b = np.clip(best, 1, 2 * L - 1)
+        d1, d2, d3 = sad[idx, b - 1], sad[idx, b], sad[idx, b + 1]
+        denom = 2.0 * (d1 + d3 - 2.0 * d2)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            delta = np.where(denom > 0, (d1 - d3) / denom, 0.0)
+        good = interior & (np.abs(delta) <= 1.0)
+        u_out[sel] = s * (xr0 + (best - L) + delta)
+        sad_out[sel] = sad[idx, best]
+        ok_out[sel] = good
+    return u_out, sad_out, ok_out
+
+
+def match_stereo(left: Features, right: Features, left_img: np.ndarray, right_img: np.ndarray,
+                 calib: StereoCalibration, params: TrackingParams) -> StereoMatches:
+    n = len(left)
+    u_right = np.full(n, -1.0, np.float32)
+    depth = np.full(n, -1.0, np.float32)
+    if n == 0 or len(right) == 0:
+        return StereoMatches(u_right, depth)
+    scale_factors = params.scale_factor ** np.arange(params.n_levels)
+    max_disp = params.max_disparity_fraction * calib.width
+
+    order = np.argsort(right.uv[:, 1], kind="stable")
+    tol = params.row_tolerance * scale_factors[left.octave]
+    qi, rpos = band_pairs(left.uv[:, 1] - tol, left.uv[:, 1] + tol, right.uv[order, 1])
+    rj = order[rpos]
+    disp = left.uv[qi, 0] - right.uv[rj, 0]
+    ok = ((disp >= params.min_disparity) & (disp <= max_disp)
+          & (np.abs(left.octave[qi] - right.octave[rj]) <= params.octave_tolerance))
+    qi, rj = qi[ok], rj[ok]
+    dist = hamming_pairs(as_words(left.descriptors), as_words(right.descriptors), qi, rj)
+    best_ref, best_d, second_d = best_two(qi, rj, dist, n)
+    good = (best_ref >= 0) & (best_d <= params.stereo_max_hamming) & (best_d < params.stereo_ratio * second_d)
+    li = np.flatnonzero(good)
+    ri = best_ref[li]
+    keep = unique_by_reference(li, ri, best_d[li])
+    li, ri = li[keep], ri[keep]
+
+    ur, sad, ok = subpixel_refine(left_img, right_img, left.uv[li].astype(np.float64),
+                                  right.uv[ri, 0].astype(np.float64), left.octave[li], scale_factors,
+                                  params.subpixel_window, params.subpixel_search)
+    li, ur, sad = li[ok], ur[ok], sad[ok]
+    disp = left.uv[li, 0] - ur
+    ok = (disp >= params.min_disparity) & (disp <= max_disp)
+    li, ur, sad, disp = li[ok], ur[ok], sad[ok], disp[ok]
+    if len(sad):
+        ok = sad <= params.sad_outlier_factor * np.median(sad)
+        li, ur, disp = li[ok], ur[ok], disp[ok]
+    u_right[li] = ur
+    depth[li] = calib.bf / disp
+    return StereoMatches(u_right, depth, n_candidates=len(qi))

@@ -1,0 +1,380 @@
+"""Stereo tracking (AGRI §3.2): ORB on both images, stereo matching, temporal matching
+against the local-map view, EPnP RANSAC + motion-only refinement, entropy-ratio keyframes.
+
+``Tracker`` is process-free: ``track(frame)`` consumes one StereoFrame and returns a
+``TrackingResult`` (with a ``KeyframeData`` payload when a keyframe is chosen);
+``apply_map_update(update)`` feeds the local map computed by local mapping back in.
+"""
+from __future__ import annotations
+
+import time
+
+import cv2
+import numpy as np
+
+from canopy.frontend.features import Features, OrbExtractor
+from canopy.frontend.geometry import (differential_entropy, pose_from_rvec, pose_information, project_stereo,
+                                      se3_inv, stereo_pose_jacobian, transform)
+from canopy.frontend.matching import as_words, knn_match, match_in_window
+from canopy.frontend.messages import KeyframeData, LocalMapUpdate, TrackingResult
+from canopy.frontend.params import TrackingParams
+from canopy.frontend.pose import refine_pose
+from canopy.frontend.stereo import StereoMatches, match_stereo
+from shared.types import StereoCalibration, StereoFrame
+
+STATUS_INIT, STATUS_OK, STATUS_LOST = "init", "ok", "lost"
+
+
+def _ms(t0: float) -> float:
+    return (time.perf_counter() - t0) * 1e3
+
+
+class _MapView:
+    """Tracking's copy of the local map: arrays of landmark ids, positions, descriptors."""
+
+    def __init__(self):
+        self.ids = np.zeros(0, np.int64)
+        self.pos = np.zeros((0, 3))
+        self.desc = np.zeros((0, 32), np.uint8)
+        self.words = as_words(self.desc)
+
+    def set(self, ids, pos, desc):
+        self.ids = np.asarray(ids, np.int64)
+        self.pos = np.asarray(pos, np.float64).reshape(-1, 3)
+        self.desc = np.ascontiguousarray(desc, np.uint8).reshape(-1, 32)
+        self.words = as_words(self.desc)
+
+
+class Tracker:
+    def __init__(self, calib: StereoCalibration, params: TrackingParams | None = None,
+                 initial_pose: np.ndarray | None = None):
+        self.calib = calib
+        self.params = (params or TrackingParams()).validate()
+        self.extractor = OrbExtractor(self.params)
+        self.scale_factors = self.params.scale_factor ** np.arange(self.params.n_levels)
+        self.K = calib.K
+        self._initial_pose = np.eye(4) if initial_pose is None else np.asarray(initial_pose, float)
+        self._max_depth = self.params.max_depth_baselines * calib.baseline
+        self._close_depth = self.params.close_depth_baselines * calib.baseline
+        # map view = last update + provisional landmarks of keyframes not yet acknowledged
+        self._update_view = _MapView()
+        self._provisional: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._view = _MapView()
+        self._view_dirty = False
+        self._next_landmark_id = 0
+        self._segment_start_kf = -1
+        # motion state
+        self._initialised = False
+        self._need_restart = False
+        self._T_last = self._initial_pose.copy()    # T_world_cam of the last good frame
+        self._velocity = np.eye(4)                  # T_last-1_last (constant-velocity model)
+        self._last_points_w: np.ndarray | None = None  # last frame's stereo points (fallback)
+        self._last_words: np.ndarray | None = None
+        self._last_matched = (np.zeros((0, 3)), as_words(np.zeros((0, 32), np.uint8)), np.zeros(0, np.int64))
+        # keyframe state
+        self._ref_kf = -1
+        self._T_ref = np.eye(4)
+        self._ref_ids = np.zeros(0, np.int64)
+        self._frames_since_kf = 0
+        self._entropy_first: float | None = None
+        self._ref_tracked_first: int | None = None
+        self._seen: list[tuple[np.ndarray, np.ndarray]] = []
+        self.n_lost = 0
+
+    # ------------------------------------------------------------------ map view
+    def apply_map_update(self, update: LocalMapUpdate) -> None:
+        """Replace the local-map view and apply corrected keyframe poses."""
+        if update.keyframe_index < self._segment_start_kf:
+            return  # stale update from a map segment before a restart
+        self._update_view.set(update.landmark_ids, update.positions, update.descriptors)
+        for k in [k for k in self._provisional if k <= update.keyframe_index]:
+            del self._provisional[k]
+        self._view_dirty = True
+        if self._ref_kf in update.keyframe_poses:
+            T_new = np.asarray(update.keyframe_poses[self._ref_kf], float)
+            C = T_new @ se3_inv(self._T_ref)  # world correction of the reference keyframe
+            self._T_ref = T_new
+            self._T_last = C @ self._T_last
+            if self._last_points_w is not None:
+                self._last_points_w = transform(C, self._last_points_w)
+
+    def _map_view(self) -> _MapView:
+        if self._view_dirty:
+            parts = [(self._update_view.ids, self._update_view.pos, self._update_view.desc)]
+            parts += [self._provisional[k] for k in sorted(self._provisional)]
+            ids = np.concatenate([p[0] for p in parts])
+            pos = np.concatenate([p[1] for p in parts])
+            desc = np.concatenate([p[2] for p in parts])
+            _, first = np.unique(ids, return_index=True)
+            first = np.sort(first)
+            self._view.set(ids[first], pos[first], desc[first])
+            self._view_dirty = False
+        return self._view
+
+    # ------------------------------------------------------------------ helpers
+    def _sigma(self, octave: np.ndarray) -> np.ndarray:
+        return self.params.pixel_sigma * self.scale_factors[octave]
+
+    def _stereo_points_world(self, feats: Features, stereo: StereoMatches, T_wc: np.ndarray, idx: np.ndarray):
+        z = stereo.depth[idx].astype(np.float64)
+        u, v = feats.uv[idx, 0].astype(np.float64), feats.uv[idx, 1].astype(np.float64)
+        Pc = np.stack([(u - self.calib.cx) * z / self.calib.fx, (v - self.calib.cy) * z / self.calib.fy, z], axis=1)
+        return transform(T_wc, Pc)
+
+    def _landmark_candidates(self, stereo: StereoMatches) -> np.ndarray:
+        return stereo.valid & (stereo.depth < self._max_depth)
+
+    def _close(self, stereo: StereoMatches) -> np.ndarray:
+        return stereo.valid & (stereo.depth < self._close_depth)
+
+    # ------------------------------------------------------------------ main entry
+    def track(self, frame: StereoFrame, fast_threshold: int | None = None) -> TrackingResult:
+        timings: dict[str, float] = {}
+        t_all = time.perf_counter()
+        t0 = time.perf_counter()
+        left = self.extractor.extract(frame.left, fast_threshold)
+        right = self.extractor.extract(frame.right, fast_threshold)
+        timings["orb"] = _ms(t0)
+        t0 = time.perf_counter()
+        stereo = match_stereo(left, right, frame.left, frame.right, self.calib, self.params)
+        timings["stereo"] = _ms(t0)
+        n_stereo = int(stereo.valid.sum())
+
+        if not self._initialised or self._need_restart:
+            res = self._initialise(frame, left, stereo, n_stereo)
+        else:
+            res = self._track_frame(frame, left, stereo, timings)
+        res.n_stereo = n_stereo
+        timings["total"] = _ms(t_all)
+        res.timings = timings
+        return res
+
+    # ------------------------------------------------------------------ (re)initialisation
+    def _initialise(self, frame: StereoFrame, feats: Features, stereo: StereoMatches, n_stereo: int) -> TrackingResult:
+        T_wc = self._T_last.copy()  # first frame: initial pose; restart: last good pose
+        if n_stereo < self.params.min_init_points:
+            self.n_lost += 1
+            return TrackingResult(frame.index, frame.timestamp, T_wc, STATUS_LOST, 0, 0, False, None,
+                                  self._ref_kf)
+        restart = True
+        self._initialised = True
+        self._need_restart = False
+        self._velocity = np.eye(4)
+        # a new map segment: forget the old view (its landmarks are not connected to this one)
+        self._update_view.set(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 32), np.uint8))
+        self._provisional.clear()
+        self._segment_start_kf = frame.index
+        self._last_matched = (np.zeros((0, 3)), as_words(np.zeros((0, 32), np.uint8)), np.zeros(0, np.int64))
+        matched_ids = np.full(len(feats), -1, np.int64)
+        kf = self._make_keyframe(frame, feats, stereo, T_wc, matched_ids, restart=restart)
+        self._after_frame(T_wc, feats, stereo)
+        return TrackingResult(frame.index, frame.timestamp, T_wc, STATUS_INIT, int((kf.new_landmark_ids >= 0).sum()),
+                              0, True, kf, frame.index, T_ref_cam=np.eye(4))
+
+    def _make_keyframe(self, frame, feats, stereo, T_wc, matched_ids, restart=False) -> KeyframeData:
+        """Build the keyframe payload; reserve ids for new close stereo landmarks."""
+        new_ids = np.full(len(feats), -1, np.int64)
+        create = self._landmark_candidates(stereo) & (matched_ids < 0)
+        idx = np.flatnonzero(create)
+        new_ids[idx] = self._next_landmark_id + np.arange(len(idx))
+        self._next_landmark_id += len(idx)
+        pos = self._stereo_points_world(feats, stereo, T_wc, idx)
+        self._provisional[frame.index] = (new_ids[idx], pos, feats.descriptors[idx])
+        self._view_dirty = True
+        if self._seen:
+            ids = np.concatenate([s[0] for s in self._seen])
+            found = np.concatenate([s[1] for s in self._seen])
+            uids, inv = np.unique(ids, return_inverse=True)
+            seen_visible = np.bincount(inv, minlength=len(uids)).astype(np.int32)
+            seen_found = np.bincount(inv, weights=found, minlength=len(uids)).astype(np.int32)
+        else:
+            uids = np.zeros(0, np.int64)
+            seen_visible = seen_found = np.zeros(0, np.int32)
+        self._seen = []
+        kf = KeyframeData(
+            index=frame.index, timestamp=frame.timestamp, T_world_cam=T_wc.copy(),
+            uv=feats.uv.astype(np.float32), u_right=stereo.u_right.astype(np.float32),
+            depth=stereo.depth.astype(np.float32), descriptors=feats.descriptors.copy(),
+            octave=feats.octave.astype(np.int32), landmark_ids=matched_ids.copy(), new_landmark_ids=new_ids,
+            scale_factor=self.params.scale_factor, restart=restart,
+            seen_ids=uids, seen_visible=seen_visible, seen_found=seen_found)
+        self._ref_kf = frame.index
+        self._T_ref = T_wc.copy()
+        self._ref_ids = np.unique(np.concatenate([matched_ids[matched_ids >= 0], new_ids[idx]]))
+        self._frames_since_kf = 0
+        self._entropy_first = None
+        self._ref_tracked_first = None
+        return kf
+
+    def _after_frame(self, T_wc, feats: Features, stereo: StereoMatches) -> None:
+        self._velocity = se3_inv(self._T_last) @ T_wc
+        self._T_last = T_wc.copy()
+        idx = np.flatnonzero(stereo.valid)
+        self._last_points_w = self._stereo_points_world(feats, stereo, T_wc, idx)
+        self._last_words = as_words(feats.descriptors[idx])
+
+    # ------------------------------------------------------------------ temporal matching
+    def _search(self, T_cw, pos, words, feats: Features, kp_words, radius: float, scaled: bool = False):
+        """Project points with a pose and match each to the best keypoint within ``radius``."""
+        proj, Pc = project_stereo(T_cw, pos, self.calib)
+        in_view = ((Pc[:, 2] > 0) & (proj[:, 0] >= 0) & (proj[:, 0] < self.calib.width)
+                   & (proj[:, 1] >= 0) & (proj[:, 1] < self.calib.height))
+        r_scale = self.scale_factors[feats.octave] if scaled else None
+        q, r, _ = match_in_window(proj[:, :2], words, np.full(len(pos), radius), feats.uv, kp_words,
+                                  self.params.map_max_hamming, self.params.map_ratio, q_mask=in_view,
+                                  r_scale=r_scale)
+        return q, r, in_view
+
+    def _initial_matches(self, T_pred_cw, view: _MapView, feats: Features, kp_words):
+        """Stage 1: 3D-2D correspondences for RANSAC.
+
+        Returns (points (K,3), keypoint indices, landmark ids (-1: not a landmark), descriptor words).
+        """
+        p = self.params
+        enough = 2 * p.min_inliers
+        # ORB-SLAM TrackWithMotionModel: the landmarks matched in the previous frame
+        pos, words, lids = self._last_matched
+        q, r, _ = self._search(T_pred_cw, pos, words, feats, kp_words, p.search_radius)
+        if len(q) < enough:  # widen the window when too few matches
+            q, r, _ = self._search(T_pred_cw, pos, words, feats, kp_words, p.search_radius_wide)
+        best = (pos[q], r, lids[q], words[q])
+        if len(q) < enough:  # the whole local map through the prediction
+            q, r, _ = self._search(T_pred_cw, view.pos, view.words, feats, kp_words, p.search_radius_wide)
+            if len(q) > len(best[1]):
+                best = (view.pos[q], r, view.ids[q], view.words[q])
+        if len(best[1]) < enough and len(view.ids):
+            # no usable prediction: appearance only (RANSAC sorts out the outliers)
+            r2, q2, _ = knn_match(feats.descriptors, view.desc, p.map_max_hamming, p.map_ratio)
+            if len(q2) > len(best[1]):
+                best = (view.pos[q2], r2, view.ids[q2], view.words[q2])
+        if len(best[1]) < enough and self._last_points_w is not None and len(self._last_points_w):
+            # last resort: the previous frame's stereo points (frame-to-frame odometry)
+            q3, r3, _ = self._search(T_pred_cw, self._last_points_w, self._last_words, feats, kp_words,
+                                     p.search_radius_wide)
+            if len(q3) > len(best[1]):
+                best = (self._last_points_w[q3], r3, np.full(len(q3), -1, np.int64), self._last_words[q3])
+        return best
+
+    def _ransac(self, frame_index: int, X: np.ndarray, uv: np.ndarray):
+        """EPnP inside RANSAC (AGRI §3.2.3), seeded per frame for determinism."""
+        p = self.params
+        if len(X) < p.min_inliers:
+            return None, np.zeros(len(X), bool)
+        cv2.setRNGSeed(p.seed + frame_index)
+        found, rvec, tvec, inl = cv2.solvePnPRansac(
+            np.ascontiguousarray(X, np.float64).reshape(-1, 1, 3),
+            np.ascontiguousarray(uv, np.float64).reshape(-1, 1, 2), self.K, None,
+            iterationsCount=p.pnp_iterations, reprojectionError=p.pnp_reprojection_error,
+            confidence=p.pnp_confidence, flags=cv2.SOLVEPNP_EPNP)
+        mask = np.zeros(len(X), bool)
+        if not found or inl is None or len(inl) < p.min_inliers:
+            return None, mask
+        mask[inl.reshape(-1)] = True
+        return pose_from_rvec(rvec, tvec), mask
+
+    def _refine(self, T_cw, X, r, feats: Features, stereo: StereoMatches, inliers=None):
+        p = self.params
+        meas = np.concatenate([feats.uv[r].astype(np.float64), stereo.u_right[r, None].astype(np.float64)], axis=1)
+        return refine_pose(T_cw, X, meas, stereo.valid[r], self._sigma(feats.octave[r]), self.calib,
+                           p.pose_opt_rounds, p.pose_opt_iterations, p.chi2_mono, p.chi2_stereo, inliers=inliers)
+
+    def _track_frame(self, frame: StereoFrame, feats: Features, stereo: StereoMatches, timings) -> TrackingResult:
+        p = self.params
+        T_pred_cw = se3_inv(self._T_last @ self._velocity)  # constant-velocity prediction
+        kp_words = as_words(feats.descriptors)
+        view = self._map_view()
+
+        t0 = time.perf_counter()
+        X, r, ids, words = self._initial_matches(T_pred_cw, view, feats, kp_words)
+        timings["match_motion"] = _ms(t0)
+        t0 = time.perf_counter()
+        T_cw, inliers = self._ransac(frame.index, X, feats.uv[r])
+        timings["pnp"] = _ms(t0)
+
+        t0 = time.perf_counter()
+        est = None
+        visible_ids = np.zeros(0, np.int64)
+        if T_cw is not None:
+            # stage 2 (TrackLocalMap): all local-map points through the RANSAC pose, small window
+            q2, r2, in_view = self._search(T_cw, view.pos, view.words, feats, kp_words, p.search_radius_local,
+                                           scaled=True)
+            visible_ids = view.ids[in_view]
+            if len(q2) >= p.min_inliers:
+                est = self._refine(T_cw, view.pos[q2], r2, feats, stereo)
+                if int(est.inliers.sum()) >= p.min_inliers:
+                    X, r, ids, words = view.pos[q2], r2, view.ids[q2], view.words[q2]
+                else:
+                    est = None
+            if est is None:
+                est = self._refine(T_cw, X, r, feats, stereo, inliers=inliers)
+        timings["track_local_map"] = _ms(t0)
+        n_matches = len(r)
+        ok = est is not None and int(est.inliers.sum()) >= p.min_inliers
+        if not ok:
+            self.n_lost += 1
+            self._need_restart = True
+            self._velocity = np.eye(4)
+            self._seen = []
+            return TrackingResult(frame.index, frame.timestamp, self._T_last.copy(), STATUS_LOST,
+                                  0 if est is None else int(est.inliers.sum()), n_matches, False, None, self._ref_kf)
+        T_cw, inliers, info = est.T_cam_world, est.inliers, est.information
+
+        T_wc = se3_inv(T_cw)
+        n_inl = int(inliers.sum())
+        keep = inliers & (ids >= 0)
+        self._last_matched = (X[keep].copy(), words[keep].copy(), ids[keep].copy())
+        matched_ids = np.full(len(feats), -1, np.int64)
+        good = inliers & (ids >= 0)
+        matched_ids[r[good]] = ids[good]
+        found_mask = np.isin(visible_ids, matched_ids[matched_ids >= 0])
+        self._seen.append((visible_ids, found_mask.astype(np.float64)))
+
+        # ---- keyframe decision (AGRI §3.2.4, Eq. 6-7 after Kerl et al. 2013) ----
+        t0 = time.perf_counter()
+        self._frames_since_kf += 1
+        from_ref = inliers & np.isin(ids, self._ref_ids)
+        n_ref = int(from_ref.sum())
+        entropy = ratio = None
+        if n_ref >= p.min_inliers:
+            # uncertainty of the motion relative to the last keyframe: the pose information
+            # carried by the keyframe's own landmarks (DVO-SLAM: frame-to-keyframe alignment)
+            meas_ref = from_ref[inliers]
+            Pc_all = transform(T_cw, X[inliers])
+            J = stereo_pose_jacobian(Pc_all[meas_ref], self.calib)
+            info_ref = pose_information(J, self._sigma(feats.octave[r[inliers]][meas_ref]), stereo.valid[r[inliers]][meas_ref])
+            try:
+                entropy = differential_entropy(np.linalg.inv(info_ref))
+            except np.linalg.LinAlgError:
+                entropy = None
+        if self._frames_since_kf == 1:
+            self._entropy_first = entropy
+            self._ref_tracked_first = n_ref
+        if entropy is not None and self._entropy_first is not None and np.isfinite(entropy) and self._entropy_first < 0:
+            # Eq. 7: alpha = H(T_k:k+j) / H(T_k:k+1); entropies are negative for a well
+            # constrained pose, so the ratio falls as the uncertainty grows with distance.
+            ratio = float(entropy / self._entropy_first)
+        close = self._close(stereo)
+        n_tracked_close = int((close[r] & inliers).sum())
+        n_new_close = int(close.sum()) - n_tracked_close
+        since = self._frames_since_kf
+        need = (
+            (ratio is not None and ratio < p.entropy_ratio_alpha)
+            or since >= p.max_frames_between_keyframes
+            or (self._ref_tracked_first is not None and n_ref < p.min_tracked_fraction * self._ref_tracked_first)
+            or (n_tracked_close < p.min_tracked_close and n_new_close > p.min_new_close_points)
+        )
+        is_kf = need and since >= p.min_frames_between_keyframes
+        kf = self._make_keyframe(frame, feats, stereo, T_wc, matched_ids) if is_kf else None
+        timings["keyframe"] = _ms(t0)
+        ref = self._ref_kf
+        T_ref_cam = se3_inv(self._T_ref) @ T_wc
+        self._after_frame(T_wc, feats, stereo)
+        full_cov = None
+        if info is not None:
+            try:
+                full_cov = np.linalg.inv(info)
+            except np.linalg.LinAlgError:
+                full_cov = None
+        return TrackingResult(frame.index, frame.timestamp, T_wc, STATUS_OK, n_inl, n_matches, is_kf, kf, ref,
+                              pose_covariance=full_cov, entropy=entropy, entropy_ratio=ratio,
+                              T_ref_cam=T_ref_cam)

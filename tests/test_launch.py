@@ -1,0 +1,121 @@
+"""End to end through launch.py: separate processes, outputs, failures.
+
+These start real actor processes on the bundled data. The kill test watches
+the run over the inspection endpoint (as a remote user would), SIGKILLs one
+actor mid-run, and checks the promises: the run ends within 2 s with a
+message naming the actor, the trajectory so far is on disk, and no
+shared-memory segment is left behind.
+"""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from actors.supervisor import inspection_client
+from protocol.messages import ActorReady, FramePose
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _shm_segments() -> set[str]:
+    return {n for n in os.listdir("/dev/shm") if n.startswith("canopy_")}
+
+
+def _launch(*args, **kw):
+    return subprocess.run([sys.executable, str(ROOT / "launch.py"), *args], cwd=ROOT, capture_output=True,
+                          text=True, timeout=kw.get("timeout", 300))
+
+
+def test_euroc_default_run_writes_every_output(tmp_path):
+    before = _shm_segments()
+    out = tmp_path / "run"
+    res = _launch("--dataset", "euroc", "--out", str(out), "--quiet")
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert "run summary" in res.stdout and "tracking success" in res.stdout
+    for name in ("trajectory.tum", "keyframes.tum", "map_points.ply", "metrics.json", "stats.json",
+                 "trajectory.png", "config_used.yaml"):
+        assert (out / name).is_file(), name
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["tracking"]["frames_processed"] == 95
+    stats = json.loads((out / "stats.json").read_text())
+    assert {"source", "enhancement", "tracking", "local_mapping"} <= set(stats)
+    assert stats["tracking"]["messages"] >= 95 and stats["tracking"]["service_ms"]["p50"] > 0
+    assert stats["tracking"]["peak_rss_mb"] > 10
+    traj = np.loadtxt(out / "trajectory.tum")
+    assert traj.shape == (95, 8)
+    assert _shm_segments() <= before
+
+
+@pytest.mark.parametrize("victim", ["tracking", "local_mapping", "enhancement", "source"])
+def test_sigkill_of_an_actor_ends_run_cleanly(tmp_path, victim):
+    before = _shm_segments()
+    endpoint = f"ipc://{tmp_path}/inspect"
+    out = tmp_path / "run"
+    proc = subprocess.Popen([sys.executable, str(ROOT / "launch.py"), "--dataset", "euroc", "--clock", "realtime",
+                             "--out", str(out), "--inspect", endpoint, "--quiet"],
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        pids, killed_at = {}, None
+        for msg in inspection_client(endpoint, ["ready", "pose"], timeout_s=120):
+            if isinstance(msg, ActorReady):
+                pids[msg.actor] = msg.pid
+            elif isinstance(msg, FramePose) and msg.index >= 20:
+                os.kill(pids[victim], signal.SIGKILL)
+                killed_at = time.monotonic()
+                break
+        assert killed_at is not None, "the run never reached frame 20"
+        stdout, stderr = proc.communicate(timeout=30)
+        ended_after = time.monotonic() - killed_at
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 1
+    assert ended_after < 2.0 + 0.5, f"run took {ended_after:.1f} s to end"  # 0.5 s: interpreter exit
+    assert f"actor '{victim}' died (killed by SIGKILL)" in stderr
+    assert "Traceback" not in stderr
+    traj = np.loadtxt(out / "trajectory.tum")
+    assert len(traj) >= 20
+    assert (out / "metrics.json").is_file()
+    assert _shm_segments() <= before, "shared memory leaked"
+
+
+@pytest.mark.parametrize("args, fragment", [
+    (["--dataset", "euroc", "--path", "/nonexistent/euroc"], "/nonexistent/euroc"),
+    (["--dataset", "kitti", "--config", "/nonexistent/cfg.yaml"], "cfg.yaml: config file not found"),
+    (["--dataset", "folder"], "folder"),
+])
+def test_bad_input_is_one_clear_line(args, fragment):
+    res = _launch(*args, timeout=60)
+    assert res.returncode == 2
+    assert fragment in res.stderr
+    assert "Traceback" not in res.stderr
+
+
+def test_unknown_config_key_names_file_and_key(tmp_path):
+    cfg = tmp_path / "bad.yaml"
+    cfg.write_text("tracking:\n  n_featurez: 10\n")
+    res = _launch("--dataset", "euroc", "--config", str(cfg), timeout=60)
+    assert res.returncode == 2
+    assert "bad.yaml" in res.stderr and "n_featurez" in res.stderr
+    assert "Traceback" not in res.stderr
+
+
+def test_corrupt_image_mid_run_names_the_file(tmp_path):
+    import shutil
+    data = tmp_path / "euroc"
+    shutil.copytree(ROOT / "data" / "euroc_v101_micro", data, ignore=shutil.ignore_patterns("imu0"))
+    victim = sorted((data / "mav0" / "cam0" / "data").glob("*.png"))[10]
+    victim.write_bytes(b"\x89PNG\r\n\x1a\n not really a png")
+    before = _shm_segments()
+    res = _launch("--dataset", "euroc", "--path", str(data), "--out", str(tmp_path / "run"), "--quiet", timeout=200)
+    assert res.returncode == 1
+    assert victim.name in res.stderr
+    assert "Traceback" not in res.stderr
+    assert len(np.loadtxt(tmp_path / "run" / "trajectory.tum")) == 10
+    assert _shm_segments() <= before
