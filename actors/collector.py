@@ -164,8 +164,7 @@ class RunCollector:
         files["stats"] = str(write_json(out_dir / "stats.json", stats))
         if len(cam) >= 2:
             try:
-                ate = (metrics.get("ate") or {}).get("rmse")
-                title = f"{run_info.get('dataset', '')}  ATE {ate:.3f} m" if ate is not None else run_info.get("dataset", "")
+                title = f"{run_info.get('source', '')} ({run_info.get('clock', '')})"
                 files["plot"] = str(plot_trajectory_png(out_dir / "trajectory.png", cam, gt, title=title))
             except Exception as exc:  # a plot must never cost the user the numbers
                 files["plot_error"] = f"{type(exc).__name__}: {exc}"

@@ -71,6 +71,7 @@ class ActorContext:
         self.control = zctx.socket(zmq.PULL)
         self.control.bind(spec.control)
         self.dropped = 0
+        self.blocked_s = 0.0  # time spent waiting on another actor inside a call; not service time
         self.extra: dict[str, Any] = {}
         self.stop_requested = False
 
@@ -94,10 +95,15 @@ class ActorContext:
         self._events.send(encode(msg))
 
     def recv_inbox(self, timeout_ms: int) -> Any | None:
-        """Blocking receive on the inbox for actors that must wait (lockstep)."""
-        if self.inbox.poll(timeout_ms):
-            return decode(self.inbox.recv())
-        return None
+        """Blocking receive on the inbox for actors that must wait (lockstep).
+        The wait is booked as blocked time, not as this actor's service time."""
+        t0 = time.perf_counter()
+        try:
+            if self.inbox.poll(timeout_ms):
+                return decode(self.inbox.recv())
+            return None
+        finally:
+            self.blocked_s += time.perf_counter() - t0
 
     def drain_inbox(self) -> list[Any]:
         out = []
@@ -117,6 +123,9 @@ class Actor:
     """Base class: override what you need. ``on_message`` is the spin_once."""
 
     name = "actor"
+    # False for producers whose messages are only acknowledgements (the source):
+    # their service time is the work done in on_tick.
+    measure_messages = True
 
     def __init__(self, config: dict, seed: int = 0):
         self.config = config
@@ -214,9 +223,14 @@ def actor_main(spec: ActorSpec) -> None:
                 current_index = getattr(msg, "index", current_index)
                 t_recv = time.time()
                 sent = getattr(msg, "sent_at", 0.0)
+                ctx.blocked_s = 0.0
                 t0 = time.perf_counter()
                 actor.on_message(msg, ctx)
-                meter.record((time.perf_counter() - t0) * 1e3, (t_recv - sent) * 1e3 if sent else None)
+                if actor.measure_messages:
+                    service_ms = (time.perf_counter() - t0 - ctx.blocked_s) * 1e3
+                    meter.record(service_ms, (t_recv - sent) * 1e3 if sent else None)
+                else:
+                    meter.messages += 1
             tick = actor.next_tick_s()
             if tick is not None and tick <= 0:
                 # A producer's work (the source reading a frame) is its service time too.

@@ -18,6 +18,7 @@ from shared.ring import FrameRing
 
 class SourceActor(Actor):
     name = "source"
+    measure_messages = False
 
     def setup(self, ctx: ActorContext) -> None:
         c = self.config
@@ -45,8 +46,11 @@ class SourceActor(Actor):
     def _release_time(self, i: int) -> float:
         return self.t0 + (self.stamps[i] - self.stamps[0]) / self.speed
 
+    def _finished(self) -> bool:
+        return self.next_index > len(self.source)
+
     def next_tick_s(self) -> float | None:
-        if not self.started or ctx_done(self):
+        if not self.started or self._finished():
             return None
         if self.lockstep:
             return None if self.awaiting else 0.0
@@ -77,7 +81,3 @@ class SourceActor(Actor):
 
     def teardown(self, ctx: ActorContext) -> None:
         self.ring.close()
-
-
-def ctx_done(actor: SourceActor) -> bool:
-    return actor.next_index > len(actor.source)

@@ -38,13 +38,10 @@ class TrackingActor(Actor):
         self.adaptive_fast = bool(enh is not None and getattr(enh, "adaptive_fast", False)
                                   and enh.method in ADAPTIVE_FAST_METHODS)
         self.fast_omega = float(getattr(enh, "fast_omega", 128.0)) if enh is not None else 128.0
-        self.kf_poses: dict[int, np.ndarray] = {}
         self.counts = {"ok": 0, "lost": 0, "init": 0, "keyframes": 0}
 
     def _apply_update(self, update: LocalMapUpdate) -> None:
         self.tracker.apply_map_update(update)
-        for idx, T in update.keyframe_poses.items():
-            self.kf_poses[int(idx)] = np.asarray(T)
 
     def on_message(self, msg, ctx: ActorContext) -> None:
         if isinstance(msg, LocalMapUpdate):
@@ -82,19 +79,18 @@ class TrackingActor(Actor):
         self.counts[res.status] = self.counts.get(res.status, 0) + 1
         if res.is_keyframe:
             self.counts["keyframes"] += 1
-            self.kf_poses[res.index] = res.T_world_cam
             ctx.send("local_mapping", res.keyframe)
             if self.lockstep:
                 self._wait_for_update(res.index, ctx)
-        ref = res.reference_kf_index
-        T_w_ref = self.kf_poses.get(ref)
-        T_ref_cam = np.linalg.inv(T_w_ref) @ res.T_world_cam if T_w_ref is not None else np.eye(4)
+        # Lost frames (no reference) keep their absolute pose: ref_keyframe = -1.
+        ref = res.reference_kf_index if res.T_ref_cam is not None else -1
+        T_ref_cam = res.T_ref_cam if res.T_ref_cam is not None else np.eye(4)
         timings = {k: float(v) for k, v in res.timings.items()}
         if "enhance_ms" in handle.info:
             timings["enhance"] = float(handle.info["enhance_ms"])
         ctx.publish(FramePose(index=res.index, timestamp=res.timestamp, T_world_cam=res.T_world_cam,
                               status=res.status, n_inliers=int(res.n_inliers), n_matches=int(res.n_matches),
-                              is_keyframe=bool(res.is_keyframe), ref_keyframe=int(ref if T_w_ref is not None else -1),
+                              is_keyframe=bool(res.is_keyframe), ref_keyframe=int(ref),
                               T_ref_cam=T_ref_cam, timings_ms=timings, sent_at=time.time()))
         ctx.extra.update(self.counts)
         if self.lockstep:
