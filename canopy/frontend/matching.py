@@ -63,7 +63,8 @@ def best_two(qi: np.ndarray, rj: np.ndarray, dist: np.ndarray, n_query: int):
     second_d = np.full(n_query, big, np.int64)
     if len(qi) == 0:
         return best_ref, best_d, second_d
-    order = np.lexsort((dist, qi))
+    # one int64 key sorts by query, then by distance (distances are < 2**16)
+    order = np.argsort(qi.astype(np.int64) * (1 << 16) + dist, kind="stable")
     qs, ds, rs = qi[order], dist[order], rj[order]
     first = np.ones(len(qs), bool)
     first[1:] = qs[1:] != qs[:-1]
@@ -81,7 +82,7 @@ def unique_by_reference(query_idx: np.ndarray, ref_idx: np.ndarray, dist: np.nda
     """Boolean mask keeping, for every reference used by several queries, only the closest."""
     if len(query_idx) == 0:
         return np.zeros(0, bool)
-    order = np.lexsort((dist, ref_idx))
+    order = np.argsort(ref_idx.astype(np.int64) * (1 << 16) + dist, kind="stable")
     keep_sorted = np.ones(len(order), bool)
     r = ref_idx[order]
     keep_sorted[1:] = r[1:] != r[:-1]
@@ -140,7 +141,18 @@ def match_in_window(q_uv: np.ndarray, q_words: np.ndarray, q_radius: np.ndarray,
         sel = np.arange(n_q)
     if len(sel) == 0:
         return empty
-    qi, rj = grid_pairs(q_uv[sel], r_uv, float(np.max(q_radius[sel])) * (1.0 if r_scale is None else float(np.max(r_scale))))
+    rmax = float(np.max(q_radius[sel]))
+    if r_scale is None:
+        qi, rj = grid_pairs(q_uv[sel], r_uv, rmax)
+    else:
+        # one grid per reference scale: coarse keypoints get wide cells, fine ones narrow cells
+        qis, rjs = [], []
+        for sc in np.unique(r_scale):
+            ref = np.flatnonzero(r_scale == sc)
+            a, b = grid_pairs(q_uv[sel], r_uv[ref], rmax * float(sc))
+            qis.append(a)
+            rjs.append(ref[b])
+        qi, rj = np.concatenate(qis), np.concatenate(rjs)
     qi = sel[qi]
     d2 = ((q_uv[qi] - r_uv[rj]) ** 2).sum(axis=1)
     rad = q_radius[qi] if r_scale is None else q_radius[qi] * r_scale[rj]

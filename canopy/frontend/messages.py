@@ -33,3 +33,4 @@ class TrackingResult:
     # pose relative to the reference keyframe as tracking knew it (ORB-SLAM's relative frame
     # pose); with the keyframe's final pose it gives the frame's final pose. None when lost.
     T_ref_cam: np.ndarray | None = None
+    keyframe_reason: str = ""    # which keyframe condition(s) fired: entropy, max_frames, ...

@@ -41,7 +41,7 @@ class TrackingParams:
     # Stage 1 (ORB-SLAM TrackWithMotionModel): project the local map with the constant-velocity
     # prediction and search a circle; widen once when too few; without a usable prediction,
     # brute-force descriptor matching (TrackReferenceKeyFrame's role; ratio test + RANSAC).
-    search_radius: float = 15.0         # px around the predicted projection
+    search_radius: float = 10.0         # px around the predicted projection
     search_radius_wide: float = 40.0    # second attempt when the first finds too few
     # Stage 2 (ORB-SLAM TrackLocalMap): re-project the whole local map with the RANSAC pose
     # and search a small circle, then refine the pose on all those matches.

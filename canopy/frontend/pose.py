@@ -18,6 +18,7 @@ from canopy.frontend.geometry import project_stereo, se3_exp, stereo_pose_jacobi
 from shared.types import StereoCalibration
 
 _MIN_DEPTH = 1e-6
+_CONVERGED_STEP = 1e-8  # |dxi| below which Gauss-Newton has converged (rad / m)
 
 
 @dataclass
@@ -71,7 +72,7 @@ def refine_pose(T_cw: np.ndarray, X_w: np.ndarray, meas: np.ndarray, has_right: 
             except np.linalg.LinAlgError:
                 break
             T = se3_exp(dx) @ T
-            if np.linalg.norm(dx) < 1e-10:
+            if np.linalg.norm(dx) < _CONVERGED_STEP:
                 break
         chi2, _, _ = measurement_chi2(T, X_w, meas, hr, sigma, calib)
         inl = chi2 <= thr

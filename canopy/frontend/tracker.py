@@ -167,6 +167,8 @@ class Tracker:
         self._last_matched = (np.zeros((0, 3)), as_words(np.zeros((0, 32), np.uint8)), np.zeros(0, np.int64))
         matched_ids = np.full(len(feats), -1, np.int64)
         kf = self._make_keyframe(frame, feats, stereo, T_wc, matched_ids, restart=restart)
+        ids, pos, desc = self._provisional[frame.index]
+        self._last_matched = (pos, as_words(desc), ids)
         self._after_frame(T_wc, feats, stereo)
         return TrackingResult(frame.index, frame.timestamp, T_wc, STATUS_INIT, int((kf.new_landmark_ids >= 0).sum()),
                               0, True, kf, frame.index, T_ref_cam=np.eye(4))
@@ -357,12 +359,16 @@ class Tracker:
         n_tracked_close = int((close[r] & inliers).sum())
         n_new_close = int(close.sum()) - n_tracked_close
         since = self._frames_since_kf
-        need = (
-            (ratio is not None and ratio < p.entropy_ratio_alpha)
-            or since >= p.max_frames_between_keyframes
-            or (self._ref_tracked_first is not None and n_ref < p.min_tracked_fraction * self._ref_tracked_first)
-            or (n_tracked_close < p.min_tracked_close and n_new_close > p.min_new_close_points)
-        )
+        reasons = []
+        if ratio is not None and ratio < p.entropy_ratio_alpha:
+            reasons.append("entropy")
+        if since >= p.max_frames_between_keyframes:
+            reasons.append("max_frames")
+        if self._ref_tracked_first is not None and n_ref < p.min_tracked_fraction * self._ref_tracked_first:
+            reasons.append("tracked_fraction")
+        if n_tracked_close < p.min_tracked_close and n_new_close > p.min_new_close_points:
+            reasons.append("close_points")  # ORB-SLAM2 stereo: few tracked close points, many new ones
+        need = bool(reasons)
         is_kf = need and since >= p.min_frames_between_keyframes
         kf = self._make_keyframe(frame, feats, stereo, T_wc, matched_ids) if is_kf else None
         timings["keyframe"] = _ms(t0)
@@ -377,4 +383,4 @@ class Tracker:
                 full_cov = None
         return TrackingResult(frame.index, frame.timestamp, T_wc, STATUS_OK, n_inl, n_matches, is_kf, kf, ref,
                               pose_covariance=full_cov, entropy=entropy, entropy_ratio=ratio,
-                              T_ref_cam=T_ref_cam)
+                              T_ref_cam=T_ref_cam, keyframe_reason="+".join(reasons) if is_kf else "")

@@ -1,0 +1,102 @@
+"""Local mapping: GTSAM local BA on generated scenes with exact ground truth, culling."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from canopy.backend import LocalMapper, MappingParams
+from canopy.frontend import KeyframeData, LocalMapUpdate
+from canopy.frontend.geometry import project_stereo, rotation_angle, se3_exp, se3_inv
+from shared.errors import ConfigError
+from shared.types import StereoCalibration
+
+CALIB = StereoCalibration(fx=450.0, fy=450.0, cx=376.0, cy=240.0, baseline=0.11, width=752, height=480)
+N_KF = 5
+
+
+def scene(rng, n=250):
+    """Points in front of a camera path moving forward/sideways; true T_world_cam per keyframe."""
+    poses = [se3_exp(np.array([0.0, 0.02 * k, 0.0, 0.15 * k, 0.0, 0.25 * k])) for k in range(N_KF)]
+    X = np.stack([rng.uniform(-3, 3, n), rng.uniform(-2, 2, n), rng.uniform(4, 9, n)], axis=1)
+    return poses, X
+
+
+def keyframe(k, T_true, T_init, X, ids_existing, ids_new, rng, depth_noise=0.0, pixel_offsets=None):
+    meas, Pc = project_stereo(se3_inv(T_true), X, CALIB)
+    if pixel_offsets is not None:
+        meas = meas + pixel_offsets
+    n = len(X)
+    depth = Pc[:, 2] * (1.0 + depth_noise * rng.standard_normal(n))
+    return KeyframeData(
+        index=k, timestamp=0.1 * k, T_world_cam=T_init, uv=meas[:, :2].astype(np.float32),
+        u_right=meas[:, 2].astype(np.float32), depth=depth.astype(np.float32),
+        descriptors=rng.integers(0, 256, (n, 32), dtype=np.uint8), octave=np.zeros(n, np.int32),
+        landmark_ids=ids_existing, new_landmark_ids=ids_new, restart=(k == 0))
+
+
+def run_ba(rng, pose_noise=(0.01, 0.03), depth_noise=0.03, outlier=False):
+    poses, X = scene(rng)
+    n = len(X)
+    mapper = LocalMapper(CALIB, MappingParams(ba_iterations=20))
+    ids = np.arange(n, dtype=np.int64)
+    updates = []
+    for k in range(N_KF):
+        if k == 0:
+            T_init = poses[0]  # the first keyframe is the gauge and stays fixed
+            kf = keyframe(0, poses[0], T_init, X, np.full(n, -1, np.int64), ids, rng, depth_noise)
+        else:
+            xi = np.concatenate([pose_noise[0] * rng.standard_normal(3), pose_noise[1] * rng.standard_normal(3)])
+            T_init = poses[k] @ se3_exp(xi)
+            off = None
+            if outlier:  # landmark 0 is observed 25 px away from where it is in every later keyframe
+                off = np.zeros((n, 3))
+                off[0] = [25.0, -20.0, 25.0]
+            kf = keyframe(k, poses[k], T_init, X, ids, np.full(n, -1, np.int64), rng, pixel_offsets=off)
+        updates.append(mapper.insert_keyframe(kf))
+    return mapper, poses, X, updates
+
+
+def test_mapping_params_validate():
+    with pytest.raises(ConfigError, match="window_size"):
+        MappingParams(window_size=1)
+
+
+def test_local_ba_recovers_true_poses_and_points():
+    rng = np.random.default_rng(0)
+    mapper, poses, X, updates = run_ba(rng)
+    traj = mapper.keyframe_trajectory()
+    assert len(traj) == N_KF
+    for T_est, T_true in zip(traj.poses, poses):
+        err = se3_inv(T_true) @ T_est
+        assert np.linalg.norm(err[:3, 3]) < 1e-3
+        assert np.degrees(rotation_angle(err[:3, :3])) < 0.01
+    pts = np.array([mapper.landmarks[i].position for i in sorted(mapper.landmarks)])
+    assert np.median(np.linalg.norm(pts - X[sorted(mapper.landmarks)], axis=1)) < 1e-3
+    last = updates[-1]
+    assert isinstance(last, LocalMapUpdate) and last.keyframe_index == N_KF - 1
+    assert set(last.keyframe_poses) == set(range(1, N_KF))  # the window minus the fixed gauge
+    assert len(last) == len(mapper.landmarks) and last.descriptors.shape == (len(last), 32)
+    assert {"insert", "ba", "cull", "total"} <= set(last.timings)
+
+
+def test_ba_is_robust_and_culls_outlier_landmark():
+    rng = np.random.default_rng(1)
+    mapper, poses, X, _ = run_ba(rng, outlier=True)
+    assert 0 not in mapper.landmarks          # its bad observations were dropped, then the landmark
+    assert len(mapper.landmarks) >= len(X) - 5
+    assert mapper.n_culled >= 1
+    for T_est, T_true in zip(mapper.keyframe_trajectory().poses, poses):
+        assert np.linalg.norm((se3_inv(T_true) @ T_est)[:3, 3]) < 2e-3
+
+
+def test_restart_starts_new_segment_without_links():
+    rng = np.random.default_rng(2)
+    poses, X = scene(rng, 60)
+    n = len(X)
+    mapper = LocalMapper(CALIB)
+    mapper.insert_keyframe(keyframe(0, poses[0], poses[0], X, np.full(n, -1, np.int64), np.arange(n), rng))
+    kf = keyframe(1, poses[1], poses[1], X, np.full(n, -1, np.int64), np.arange(n) + 1000, rng)
+    kf.restart = True
+    upd = mapper.insert_keyframe(kf)
+    assert set(upd.landmark_ids.tolist()) == set(range(1000, 1000 + n))
+    assert mapper.keyframes[1].segment == mapper.keyframes[0].segment + 1
