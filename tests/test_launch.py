@@ -119,3 +119,28 @@ def test_corrupt_image_mid_run_names_the_file(tmp_path):
     assert "Traceback" not in res.stderr
     assert len(np.loadtxt(tmp_path / "run" / "trajectory.tum")) == 10
     assert _shm_segments() <= before
+
+
+def test_lockstep_runs_are_identical_across_processes(tmp_path):
+    """lockstep promises the same trajectory on every run (seeded RANSAC, ordered messages)."""
+    trajs = []
+    for k in range(2):
+        out = tmp_path / f"run{k}"
+        res = _launch("--dataset", "kitti", "--max-frames", "20", "--out", str(out), "--quiet")
+        assert res.returncode == 0, res.stderr[-2000:]
+        trajs.append((out / "trajectory.tum").read_text())
+    a, b = ([ln for ln in t.splitlines() if not ln.startswith("#")] for t in trajs)
+    assert len(a) == len(b) == 20
+    diff = [(i, x, y) for i, (x, y) in enumerate(zip(a, b)) if x != y]
+    assert not diff, f"{len(diff)} poses differ, first: {diff[0]}"
+
+
+def test_kitti_run_is_accurate_through_the_actors(tmp_path):
+    out = tmp_path / "run"
+    res = _launch("--dataset", "kitti", "--out", str(out), "--quiet")
+    assert res.returncode == 0, res.stderr[-2000:]
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["tracking"]["frames_processed"] == 51
+    assert metrics["tracking"]["frames_lost"] == 0
+    assert metrics["ate"]["rmse"] < 0.5
+    assert metrics["kitti"]["t_rel_percent"] is not None

@@ -255,32 +255,6 @@ def nearest_match(query: np.ndarray, ref: np.ndarray, tol) -> tuple[np.ndarray, 
     return np.nonzero(ok)[0].astype(np.int64), best[ok].astype(np.int64)
 
 
-def quat_wxyz_to_rot(q: np.ndarray) -> np.ndarray:
-    """(N, 4) Hamilton quaternions (w, x, y, z) to (N, 3, 3) rotation matrices."""
-    q = np.asarray(q, dtype=np.float64).reshape(-1, 4)
-    norm = np.linalg.norm(q, axis=1, keepdims=True)
-    if np.any(norm < 1e-9):
-        raise ValueError("zero quaternion")
-    w, x, y, z = (q / norm).T
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
-            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
-            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
-        ],
-        axis=1,
-    )
-
-
-def poses_from_pq(p: np.ndarray, q_wxyz: np.ndarray) -> np.ndarray:
-    """(N, 4, 4) homogeneous poses from positions and w-first quaternions."""
-    n = len(p)
-    T = np.tile(np.eye(4), (n, 1, 1))
-    T[:, :3, :3] = quat_wxyz_to_rot(q_wxyz)
-    T[:, :3, 3] = p
-    return T
-
-
 def truncate(max_frames: int | None, n: int, where: Path) -> int:
     """Number of frames to keep given ``max_frames``."""
     if max_frames is None:

@@ -11,6 +11,7 @@ import cv2
 import numpy as np
 
 from shared.errors import InputError
+from shared.geometry import poses_from_xyz_quat_wxyz
 from shared.types import StereoCalibration, Trajectory
 
 from .base import (
@@ -19,7 +20,6 @@ from .base import (
     nearest_match,
     number,
     numbers,
-    poses_from_pq,
     read_text,
     require_dir,
     require_file,
@@ -100,7 +100,7 @@ def _read_groundtruth(csv_path: Path) -> tuple[np.ndarray, np.ndarray]:
     if not np.all(np.isfinite(pq)) or np.any(np.linalg.norm(pq[:, 3:7], axis=1) < 1e-6):
         raise InputError(csv_path, "ground truth contains non-finite values or zero quaternions")
     order = np.argsort(st, kind="stable")
-    return st[order], poses_from_pq(pq[order, :3], pq[order, 3:7])
+    return st[order], poses_from_xyz_quat_wxyz(pq[order, :3], pq[order, 3:7])
 
 
 def _ns_to_seconds(ns: np.ndarray) -> np.ndarray:

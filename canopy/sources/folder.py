@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from shared.errors import InputError
+from shared.geometry import poses_from_xyz_quat_wxyz
 from shared.types import StereoCalibration, Trajectory
 
 from .base import (
@@ -21,7 +22,6 @@ from .base import (
     load_yaml_file,
     nearest_match,
     number,
-    poses_from_pq,
     read_grey,
     read_number_table,
     require_dir,
@@ -91,7 +91,7 @@ class FolderSource(StereoSource):
             if len(fi):
                 q_wxyz = tum[gi][:, [7, 4, 5, 6]]  # TUM stores qx qy qz qw
                 ground_truth = Trajectory(
-                    stamps[fi], poses_from_pq(tum[gi, 1:4], q_wxyz),
+                    stamps[fi], poses_from_xyz_quat_wxyz(tum[gi, 1:4], q_wxyz),
                     meta={"frame": "left camera (as given)", "source": str(gt_path),
                           "frame_indices": fi.tolist()},
                 )
