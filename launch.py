@@ -36,7 +36,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="image enhancement before feature extraction (default from the config)")
     p.add_argument("--inspect", default=None, metavar="ENDPOINT",
                    help="publish every event on this ZeroMQ endpoint for remote clients, "
-                        "e.g. tcp://0.0.0.0:5560 (see tools/inspect.py)")
+                        "e.g. tcp://0.0.0.0:5560 (see tools/watch_run.py)")
     p.add_argument("--quiet", action="store_true", help="no progress line")
     return p
 

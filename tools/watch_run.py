@@ -2,7 +2,7 @@
 """Watch a running Canopy SLAM session from another machine.
 
     python launch.py --dataset kitti --inspect tcp://0.0.0.0:5560      # on the robot
-    python tools/inspect.py tcp://robot:5560                             # anywhere
+    python tools/watch_run.py tcp://robot:5560                             # anywhere
 
 Prints one line per tracked frame and a per-actor latency line every time an
 actor reports its stats (once a second).
