@@ -12,8 +12,8 @@ from __future__ import annotations
 import os
 import sys
 
-# Python puts this script's folder first on sys.path, where tools/inspect.py would
-# shadow the standard library's inspect module: put the repository root there instead.
+# Run as a script, Python puts tools/ first on sys.path; the repository root is what
+# must be importable (canopy, shared), so it takes that place.
 sys.path[0] = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 import argparse  # noqa: E402
