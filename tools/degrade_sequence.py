@@ -37,8 +37,7 @@ from __future__ import annotations
 import os
 import sys
 
-# Run as a script, this folder comes first on sys.path, and tools/inspect.py would
-# shadow the standard library's inspect (imported by dataclasses): drop the folder.
+# Run as a script, Python puts tools/ first on sys.path; nothing there is a library.
 if sys.path and os.path.abspath(sys.path[0] or ".") == os.path.dirname(os.path.abspath(__file__)):
     sys.path.pop(0)
 
