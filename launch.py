@@ -18,9 +18,13 @@ def build_parser() -> argparse.ArgumentParser:
         description="Stereo visual SLAM for low light and haze. With no --path, runs on the "
                     "snippet of the dataset bundled in data/.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    p.add_argument("--dataset", choices=("euroc", "kitti", "folder"), default="euroc",
-                   help="dataset layout: EuRoC ASL folder (mav0/), KITTI odometry sequence, or a folder "
-                        "with left/, right/ and calib.yaml")
+    p.add_argument("--dataset", choices=("euroc", "kitti", "folder", "synthetic"), default="euroc",
+                   help="dataset layout: EuRoC ASL folder (mav0/), KITTI odometry sequence, a folder "
+                        "with left/, right/ and calib.yaml, or a generated orchard sequence (see --preset)")
+    p.add_argument("--preset", default=None,
+                   help="with --dataset synthetic: day-loop (default), dusk-loop, haze-row or dark-rows; "
+                        "generated once into cache/synthetic/ (with --max-frames N only N frames)")
+    p.add_argument("--seed", type=int, default=0, help="with --dataset synthetic: the generator's seed")
     p.add_argument("--path", default=None,
                    help="dataset folder; default: the bundled EuRoC V1_01 / KITTI 06 snippet in data/")
     p.add_argument("--config", default=None,
@@ -46,11 +50,14 @@ def main(argv: list[str] | None = None) -> int:
     if args.max_frames is not None and args.max_frames < 1:
         print("error: --max-frames must be at least 1", file=sys.stderr)
         return 2
+    if args.preset is not None and args.dataset != "synthetic":
+        print("error: --preset only applies to --dataset synthetic", file=sys.stderr)
+        return 2
     try:
         from canopy.app import run_slam
         result = run_slam(args.dataset, path=args.path, config=args.config, out=args.out, clock=args.clock,
                           max_frames=args.max_frames, enhance=args.enhance, inspect=args.inspect,
-                          progress=not args.quiet)
+                          progress=not args.quiet, preset=args.preset, seed=args.seed)
     except CanopyError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -18,7 +18,34 @@ from actors.supervisor import RingSpec, RunOutcome, Supervisor
 from canopy.config import REPO_ROOT, load_run_config, with_overrides
 from canopy.sources import open_source
 
-DATASETS = ("euroc", "kitti", "folder")
+DATASETS = ("euroc", "kitti", "folder", "synthetic")
+# Generated sequences are cached here (override with CANOPY_CACHE_DIR, e.g. on a bigger disk).
+SYNTHETIC_CACHE_ENV = "CANOPY_CACHE_DIR"
+
+
+def synthetic_cache_dir() -> Path:
+    return Path(os.environ.get(SYNTHETIC_CACHE_ENV, REPO_ROOT / "cache")) / "synthetic"
+
+
+def prepare_synthetic(preset: str | None, n_frames: int | None, seed: int, progress: bool) -> str:
+    """Generate (or reuse from the cache) a synthetic orchard sequence; return its EuRoC folder."""
+    import sys
+
+    from canopy.synthetic import PRESETS, generate_sequence
+    from shared.errors import ConfigError
+
+    preset = preset or "day-loop"
+    if preset not in PRESETS:
+        raise ConfigError("--preset", f"unknown preset {preset!r}; choose one of {sorted(PRESETS)}")
+    folder = synthetic_cache_dir() / f"{preset}-seed{seed}-{n_frames if n_frames else 'full'}"
+
+    def report(done: int, total: int) -> None:
+        if progress and (done == total or done % 50 == 0):
+            sys.stderr.write(f"\r  generating {preset}: {done}/{total} frames")
+            sys.stderr.write("\n" if done == total else "")
+            sys.stderr.flush()
+
+    return str(generate_sequence(preset, folder, n_frames=n_frames, seed=seed, progress=report))
 
 
 @dataclass
@@ -62,18 +89,26 @@ def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_fra
 
 def run_slam(dataset: str, path: str | None = None, config: str | None = None, out: str | None = None,
              clock: str | None = None, max_frames: int | None = None, enhance: str | None = None,
-             inspect: str | None = None, progress: bool = True) -> RunResult:
+             inspect: str | None = None, progress: bool = True, preset: str | None = None,
+             seed: int = 0) -> RunResult:
     if dataset not in DATASETS:
         from shared.errors import ConfigError
         raise ConfigError("--dataset", f"unknown dataset {dataset!r}; choose one of {DATASETS}")
     cfg = with_overrides(load_run_config(dataset, config), clock=clock, enhance=enhance)
-    source = open_source(dataset, path, max_frames=max_frames)  # validates the dataset before any process starts
+    if dataset == "synthetic":
+        # A generated sequence is written in the EuRoC ASL layout and read as such.
+        if path is None:
+            path = prepare_synthetic(preset, max_frames, seed, progress)
+        dataset_kind = "euroc"
+    else:
+        dataset_kind = dataset
+    source = open_source(dataset_kind, path, max_frames=max_frames)  # validates the dataset before any process starts
     calib = source.calibration
     out_dir = Path(out) if out else default_out_dir(dataset)
     run_dir = Supervisor.make_run_dir()
     tag = f"canopy_{os.getpid()}_{int(time.time() * 1000) % 100000}"
     rings = {"raw": f"{tag}_raw", "enhanced": f"{tag}_enh"}
-    specs = build_actor_specs(run_dir, cfg, dataset, path, max_frames, rings, calib)
+    specs = build_actor_specs(run_dir, cfg, dataset_kind, path, max_frames, rings, calib)
     collector = RunCollector(n_frames=len(source), progress=progress)
     supervisor = Supervisor(
         specs, [RingSpec(rings["raw"], cfg.runtime.ring_slots, calib.height, calib.width),
@@ -83,7 +118,8 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
         inspect_endpoint=inspect, run_dir=run_dir)
     outcome = supervisor.run()
     collector.finish_progress()
-    run_info = {"dataset": dataset, "path": str(source.root) if hasattr(source, "root") else path,
+    run_info = {"dataset": dataset, "preset": preset if dataset == "synthetic" else None,
+                "path": str(source.root) if hasattr(source, "root") else path,
                 "source": source.name, "clock": cfg.runtime.clock,
                 "enhancement": getattr(cfg.enhancement, "method", "none"), "config_file": cfg.source_file,
                 "outcome": outcome.reason, "ok": outcome.ok, "wall_s": outcome.wall_s,

@@ -28,8 +28,9 @@ def _shm_segments() -> set[str]:
 
 
 def _launch(*args, **kw):
+    env = {**os.environ, **kw.get("env", {})}
     return subprocess.run([sys.executable, str(ROOT / "launch.py"), *args], cwd=ROOT, capture_output=True,
-                          text=True, timeout=kw.get("timeout", 300))
+                          text=True, timeout=kw.get("timeout", 300), env=env)
 
 
 def test_euroc_default_run_writes_every_output(tmp_path):
@@ -144,3 +145,25 @@ def test_kitti_run_is_accurate_through_the_actors(tmp_path):
     assert metrics["tracking"]["frames_lost"] == 0
     assert metrics["ate"]["rmse"] < 0.5
     assert metrics["kitti"]["t_rel_percent"] is not None
+
+
+def test_synthetic_preset_generates_and_tracks(tmp_path):
+    out = tmp_path / "run"
+    res = _launch("--dataset", "synthetic", "--preset", "day-loop", "--max-frames", "60", "--out", str(out),
+                  "--quiet", timeout=400, env={"CANOPY_CACHE_DIR": str(tmp_path / "cache")})
+    assert res.returncode == 0, res.stderr[-2000:]
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["run"]["preset"] == "day-loop"
+    assert metrics["tracking"]["frames_processed"] == 60 and metrics["tracking"]["frames_lost"] == 0
+    assert metrics["ate"]["rmse"] < 0.05  # exact ground truth, 3 s of driving
+    assert (tmp_path / "cache" / "synthetic").is_dir()
+
+
+@pytest.mark.parametrize("args, fragment", [
+    (["--dataset", "synthetic", "--preset", "moon-base"], "unknown preset 'moon-base'"),
+    (["--dataset", "euroc", "--preset", "day-loop"], "--preset only applies"),
+])
+def test_bad_synthetic_arguments(args, fragment):
+    res = _launch(*args, timeout=60)
+    assert res.returncode == 2
+    assert fragment in res.stderr and "Traceback" not in res.stderr

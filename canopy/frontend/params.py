@@ -22,6 +22,9 @@ class TrackingParams:
     patch_size: int = 31                # ORB descriptor patch (px)
     # Grid bucketing: detect n_features * oversample corners, then keep the strongest
     # ones cell by cell so that features spread over the image (ORB-SLAM's grid idea).
+    # Extract the right image's ORB in a worker thread while the left one runs here:
+    # OpenCV releases the GIL, so on 2 cores the two images cost about one.
+    parallel_extraction: bool = True
     grid_cols: int = 16
     grid_rows: int = 8
     oversample: float = 1.6

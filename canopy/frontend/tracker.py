@@ -8,6 +8,7 @@ against the local-map view, EPnP RANSAC + motion-only refinement, entropy-ratio 
 from __future__ import annotations
 
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 import cv2
 import numpy as np
@@ -51,6 +52,9 @@ class Tracker:
         self.calib = calib
         self.params = (params or TrackingParams()).validate()
         self.extractor = OrbExtractor(self.params)
+        # cv2.ORB objects are not thread-safe: the right image gets its own extractor.
+        self.extractor_right = OrbExtractor(self.params)
+        self._pool = ThreadPoolExecutor(max_workers=1) if self.params.parallel_extraction else None
         self.scale_factors = self.params.scale_factor ** np.arange(self.params.n_levels)
         self.K = calib.K
         self._initial_pose = np.eye(4) if initial_pose is None else np.asarray(initial_pose, float)
@@ -132,8 +136,13 @@ class Tracker:
         timings: dict[str, float] = {}
         t_all = time.perf_counter()
         t0 = time.perf_counter()
-        left = self.extractor.extract(frame.left, fast_threshold)
-        right = self.extractor.extract(frame.right, fast_threshold)
+        if self._pool is not None:
+            right_job = self._pool.submit(self.extractor_right.extract, frame.right, fast_threshold)
+            left = self.extractor.extract(frame.left, fast_threshold)
+            right = right_job.result()
+        else:
+            left = self.extractor.extract(frame.left, fast_threshold)
+            right = self.extractor_right.extract(frame.right, fast_threshold)
         timings["orb"] = _ms(t0)
         t0 = time.perf_counter()
         stereo = match_stereo(left, right, frame.left, frame.right, self.calib, self.params)
