@@ -181,13 +181,13 @@ def format_summary(summary: dict, outcome_reason: str, n_cores: int) -> str:
              f"  tracking success     {t['tracking_success_percent']:.1f} %",
              f"  map points           {m.get('map_points', 0)}"]
     ate = m.get("ate")
-    if ate:
+    if ate and ate.get("rmse") is not None:
         lines.append(f"  ATE (SE3-aligned)    rmse {ate['rmse']:.4f} m   max {ate['max']:.4f} m   (n={ate['n']})")
     rpe_f = m.get("rpe_frame")
-    if rpe_f:
+    if rpe_f and rpe_f.get("rmse") is not None:
         lines.append(f"  RPE per frame        rmse {rpe_f['rmse']:.4f} m   rot {rpe_f.get('rot_rmse', float('nan')):.3f} deg")
     rpe_m = m.get("rpe_metre")
-    if rpe_m:
+    if rpe_m and rpe_m.get("rmse") is not None:
         lines.append(f"  RPE per metre        rmse {rpe_m['rmse']:.4f} m   rot {rpe_m.get('rot_rmse', float('nan')):.3f} deg")
     kitti = m.get("kitti") or {}
     if kitti.get("t_rel_percent") is not None:

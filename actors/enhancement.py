@@ -11,6 +11,7 @@ import time
 
 import numpy as np
 
+from actors.backlog import FrameBacklog, max_frame_age
 from actors.runtime import Actor, ActorContext
 from canopy.enhance import make_enhancer
 from protocol.messages import EndOfStream, FrameHandle
@@ -28,50 +29,48 @@ def check_pair(left: np.ndarray, right: np.ndarray, height: int, width: int, ind
 
 class EnhancementActor(Actor):
     name = "enhancement"
+    measure_messages = False  # frames are timed when taken from the backlog
 
     def setup(self, ctx: ActorContext) -> None:
         self.in_ring = FrameRing.attach(self.config["in_ring"])
         self.out_ring = FrameRing.attach(self.config["out_ring"])
         self.enhancer = make_enhancer(self.config["params"])
-        self.lockstep = self.config["clock"] == "lockstep"
+        self.backlog = FrameBacklog(max_frame_age(self.config["clock"], self.config["frame_period_s"]))
         self.methods: dict[str, int] = {}
 
     def on_message(self, msg, ctx: ActorContext) -> None:
-        if isinstance(msg, EndOfStream):
-            ctx.send("tracking", EndOfStream(n_frames=msg.n_frames, sent_at=time.time()))
+        self.backlog.push(msg)
+
+    def next_tick_s(self) -> float | None:
+        return 0.0 if self.backlog.has_work() else None
+
+    def on_tick(self, ctx: ActorContext) -> float | None:
+        handle, dropped = self.backlog.pop()
+        ctx.dropped += dropped
+        if handle is None:
+            ctx.send("tracking", EndOfStream(n_frames=self.backlog.end.n_frames, sent_at=time.time()))
             ctx.stop()
-            return
-        if not isinstance(msg, FrameHandle):
-            return
-        if not self.lockstep:
-            # Fell behind: keep only the newest frame, count the rest as dropped.
-            for newer in ctx.drain_inbox():
-                if isinstance(newer, FrameHandle):
-                    ctx.dropped += 1
-                    msg = newer
-                elif isinstance(newer, EndOfStream):
-                    self.on_message(msg, ctx)
-                    self.on_message(newer, ctx)
-                    return
+            return None
         try:
-            index, stamp, (left, right) = self.in_ring.read(msg.slot, msg.generation)
+            index, stamp, (left, right) = self.in_ring.read(handle.slot, handle.generation)
         except SlotOverwritten:
             ctx.dropped += 1
-            return
+            return handle.sent_at
         lay = self.out_ring.layout
+        check_pair(left, right, lay.height, lay.width, index)
         t0 = time.perf_counter()
         left_e, info = self.enhancer(left)
-        right_e, _ = self.enhancer(right, method=info.get("method"))
+        right_e, _ = self.enhancer(right, method=info["method"])
         enhance_ms = (time.perf_counter() - t0) * 1e3
         check_pair(left_e, right_e, lay.height, lay.width, index)
         slot, gen = self.out_ring.write(index, stamp, [left_e, right_e])
-        method = info.get("method", "none")
-        self.methods[method] = self.methods.get(method, 0) + 1
+        self.methods[info["method"]] = self.methods.get(info["method"], 0) + 1
         ctx.extra["methods"] = dict(self.methods)
         info = {k: v for k, v in info.items() if isinstance(v, (int, float, str, bool))}
         info["enhance_ms"] = enhance_ms
         ctx.send("tracking", FrameHandle(index=index, timestamp=stamp, ring=self.out_ring.name, slot=slot,
                                          generation=gen, sent_at=time.time(), info=info))
+        return handle.sent_at
 
     def teardown(self, ctx: ActorContext) -> None:
         self.in_ring.close()

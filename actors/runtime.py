@@ -123,8 +123,8 @@ class Actor:
     """Base class: override what you need. ``on_message`` is the spin_once."""
 
     name = "actor"
-    # False for producers whose messages are only acknowledgements (the source):
-    # their service time is the work done in on_tick.
+    # False for actors whose messages only queue work (frames go to a backlog,
+    # acknowledgements to the source): their service time is measured in on_tick.
     measure_messages = True
 
     def __init__(self, config: dict, seed: int = 0):
@@ -144,8 +144,10 @@ class Actor:
         """Seconds until ``on_tick`` wants to run; None = only on messages."""
         return None
 
-    def on_tick(self, ctx: ActorContext) -> None:
-        pass
+    def on_tick(self, ctx: ActorContext) -> float | None:
+        """Do due work. Return None if nothing was done, else the ``sent_at`` of
+        the item handled (0.0 if it had none) so it is timed like a message."""
+        return None
 
     def teardown(self, ctx: ActorContext) -> None:
         pass
@@ -164,8 +166,8 @@ class _Meter:
         self.peak_rss = 0.0
         self.last = time.monotonic()
 
-    def record(self, service_ms: float, queue_ms: float | None, count: bool = True) -> None:
-        self.messages += int(count)
+    def record(self, service_ms: float, queue_ms: float | None) -> None:
+        self.messages += 1
         self.service.append(service_ms)
         if queue_ms is not None:
             self.queue.append(max(queue_ms, 0.0))
@@ -229,14 +231,17 @@ def actor_main(spec: ActorSpec) -> None:
                 if actor.measure_messages:
                     service_ms = (time.perf_counter() - t0 - ctx.blocked_s) * 1e3
                     meter.record(service_ms, (t_recv - sent) * 1e3 if sent else None)
-                else:
-                    meter.messages += 1
             tick = actor.next_tick_s()
             if tick is not None and tick <= 0:
-                # A producer's work (the source reading a frame) is its service time too.
+                # Work done on a tick (a source reading a frame, a frame taken from a
+                # backlog) is service time; the tick returns the item's sent_at.
+                ctx.blocked_s = 0.0
+                t_start = time.time()
                 t0 = time.perf_counter()
-                actor.on_tick(ctx)
-                meter.record((time.perf_counter() - t0) * 1e3, None, count=False)
+                sent = actor.on_tick(ctx)
+                if sent is not None:
+                    meter.record((time.perf_counter() - t0 - ctx.blocked_s) * 1e3,
+                                 (t_start - sent) * 1e3 if sent else None)
             if time.monotonic() - meter.last >= STATS_PERIOD_S:
                 ctx.publish(meter.stats(spec.name, ctx))
             if os.getppid() != parent:  # supervisor vanished: do not linger as an orphan

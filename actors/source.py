@@ -58,19 +58,19 @@ class SourceActor(Actor):
             return 0.0
         return self._release_time(self.next_index) - time.monotonic()
 
-    def on_tick(self, ctx: ActorContext) -> None:
+    def on_tick(self, ctx: ActorContext) -> float | None:
         n = len(self.source)
         if self.next_index >= n:
             ctx.send("enhancement", EndOfStream(n_frames=self.sent, sent_at=time.time()))
             ctx.extra["frames_sent"] = self.sent
             self.next_index = n + 1
             ctx.stop()
-            return
+            return None
         i = self.next_index
         self.next_index += 1
         if not self.lockstep and time.monotonic() - self._release_time(i) > self.period:
             ctx.dropped += 1  # too late to be useful: a live camera would have overwritten it
-            return
+            return None
         frame = self.source.frame(i)
         slot, gen = self.ring.write(frame.index, frame.timestamp, [frame.left, frame.right])
         ctx.send("enhancement", FrameHandle(index=frame.index, timestamp=frame.timestamp, ring=self.ring.name,
@@ -78,6 +78,7 @@ class SourceActor(Actor):
         self.sent += 1
         ctx.extra["frames_sent"] = self.sent
         self.awaiting = self.lockstep
+        return 0.0
 
     def teardown(self, ctx: ActorContext) -> None:
         self.ring.close()

@@ -13,6 +13,7 @@ import time
 
 import numpy as np
 
+from actors.backlog import FrameBacklog, max_frame_age
 from actors.runtime import Actor, ActorContext
 from canopy.enhance import adaptive_fast_threshold
 from canopy.frontend import Tracker
@@ -27,12 +28,14 @@ ADAPTIVE_FAST_METHODS = ("afe", "auto")
 
 class TrackingActor(Actor):
     name = "tracking"
+    measure_messages = False  # frames are timed when taken from the backlog
 
     def setup(self, ctx: ActorContext) -> None:
         c = self.config
         self.ring = FrameRing.attach(c["ring"])
         self.tracker = Tracker(c["calib"], c["params"])
         self.lockstep = c["clock"] == "lockstep"
+        self.backlog = FrameBacklog(max_frame_age(c["clock"], c["frame_period_s"]))
         self.wait_s = float(c.get("lockstep_wait_s", 60.0))
         enh = c.get("enhancement")
         self.adaptive_fast = bool(enh is not None and getattr(enh, "adaptive_fast", False)
@@ -46,32 +49,29 @@ class TrackingActor(Actor):
     def on_message(self, msg, ctx: ActorContext) -> None:
         if isinstance(msg, LocalMapUpdate):
             self._apply_update(msg)
-            return
-        if isinstance(msg, EndOfStream):
-            ctx.send("local_mapping", EndOfStream(n_frames=msg.n_frames, sent_at=time.time()))
+        else:
+            self.backlog.push(msg)
+
+    def next_tick_s(self) -> float | None:
+        return 0.0 if self.backlog.has_work() else None
+
+    def on_tick(self, ctx: ActorContext) -> float | None:
+        # Map updates that arrived meanwhile go in before the next frame is tracked.
+        for msg in ctx.drain_inbox():
+            self.on_message(msg, ctx)
+        handle, dropped = self.backlog.pop()
+        ctx.dropped += dropped
+        if handle is None:
+            ctx.send("local_mapping", EndOfStream(n_frames=self.backlog.end.n_frames, sent_at=time.time()))
             ctx.stop()
-            return
-        if not isinstance(msg, FrameHandle):
-            return
-        end = None
-        if not self.lockstep:
-            # Realtime: apply every pending map update, track only the newest frame.
-            for newer in ctx.drain_inbox():
-                if isinstance(newer, LocalMapUpdate):
-                    self._apply_update(newer)
-                elif isinstance(newer, FrameHandle):
-                    ctx.dropped += 1
-                    msg = newer
-                elif isinstance(newer, EndOfStream):
-                    end = newer
+            return None
         try:
-            index, stamp, (left, right) = self.ring.read(msg.slot, msg.generation)
+            index, stamp, (left, right) = self.ring.read(handle.slot, handle.generation)
         except SlotOverwritten:
             ctx.dropped += 1
         else:
-            self._track(StereoFrame(index, stamp, left, right), msg, ctx)
-        if end is not None:
-            self.on_message(end, ctx)
+            self._track(StereoFrame(index, stamp, left, right), handle, ctx)
+        return handle.sent_at
 
     def _track(self, frame: StereoFrame, handle: FrameHandle, ctx: ActorContext) -> None:
         fast = adaptive_fast_threshold(frame.left, self.fast_omega) if self.adaptive_fast else None

@@ -61,11 +61,12 @@ def default_out_dir(dataset: str) -> Path:
 
 
 def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_frames: int | None,
-                      rings: dict[str, str], calib) -> list[ActorSpec]:
+                      rings: dict[str, str], calib, frame_rate_hz: float) -> list[ActorSpec]:
     ep = {name: Supervisor.endpoints(run_dir, name) for name in ("source", "enhancement", "tracking", "local_mapping")}
     events = f"ipc://{run_dir}/supervisor.events"
     rt = cfg.runtime
-    common = {"clock": rt.clock}
+    # In realtime a frame older than one frame period is skipped when a newer one waits.
+    common = {"clock": rt.clock, "frame_period_s": 1.0 / (frame_rate_hz * rt.realtime_speed)}
 
     def spec(name, factory, config, outputs):
         return ActorSpec(name=name, factory=factory, config={**common, **config}, inbox=ep[name][0],
@@ -108,7 +109,7 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
     run_dir = Supervisor.make_run_dir()
     tag = f"canopy_{os.getpid()}_{int(time.time() * 1000) % 100000}"
     rings = {"raw": f"{tag}_raw", "enhanced": f"{tag}_enh"}
-    specs = build_actor_specs(run_dir, cfg, dataset_kind, path, max_frames, rings, calib)
+    specs = build_actor_specs(run_dir, cfg, dataset_kind, path, max_frames, rings, calib, source.rate_hz)
     collector = RunCollector(n_frames=len(source), progress=progress)
     supervisor = Supervisor(
         specs, [RingSpec(rings["raw"], cfg.runtime.ring_slots, calib.height, calib.width),
