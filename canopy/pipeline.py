@@ -28,6 +28,7 @@ class SequentialResult:
     tracking_timings: list[dict[str, float]] = field(default_factory=list)
     mapping_timings: list[dict[str, float]] = field(default_factory=list)
     n_lost: int = 0
+    map_lines: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))  # (L,2,3) endpoints A, B
 
     @property
     def n_frames(self) -> int:
@@ -85,5 +86,5 @@ def run_sequential(source, tracking_params: TrackingParams | None = None,
             poses[i] = poses[i - 1]
     traj = Trajectory(np.asarray(stamps), np.asarray(poses).reshape(-1, 4, 4), meta={"statuses": statuses})
     return SequentialResult(traj, mapper.keyframe_trajectory(), mapper.map_points(), statuses, kf_indices,
-                            track_t, map_t, tracker.n_lost)
+                            track_t, map_t, tracker.n_lost, map_lines=mapper.map_lines())
 

@@ -152,6 +152,14 @@ class KeyframeData:
     seen_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     seen_visible: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
     seen_found: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    # line observations (issue 4; empty when tracking runs without lines). Row j is a left
+    # segment matched to map line ``line_ids[j]`` or creating line ``new_line_ids[j]``.
+    line_segments: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), np.float32))        # (K,4) px
+    line_segments_right: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), np.float32))  # NaN: no stereo
+    line_descriptors: np.ndarray = field(default_factory=lambda: np.zeros((0, 32), np.uint8))      # (K,32) LBD
+    line_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))                    # (K,) -1: none
+    new_line_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))                # (K,) -1: none
+    line_endpoints_cam: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))            # (K,2,3) NaN: none
 
     def __len__(self) -> int:
         return len(self.uv)
@@ -171,6 +179,10 @@ class LocalMapUpdate:
     descriptors: np.ndarray      # (M,32) uint8
     keyframe_poses: dict[int, np.ndarray] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
+    # line landmarks of the local map (issue 4; empty without lines): endpoints A, B in world
+    line_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))              # (L,)
+    line_endpoints: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))          # (L,2,3)
+    line_descriptors: np.ndarray = field(default_factory=lambda: np.zeros((0, 32), np.uint8))  # (L,32)
 
     def __len__(self) -> int:
         return len(self.landmark_ids)

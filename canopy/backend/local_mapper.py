@@ -1,5 +1,6 @@
 """Local mapping (AGRI §3.3): keyframe insertion, stereo landmark creation, local bundle
-adjustment in GTSAM (Eq. 8-11, point terms) with a Huber kernel, landmark culling.
+adjustment in GTSAM (Eq. 8-11, point terms; with ``MappingParams.use_lines`` also the line
+terms of Eq. 10 on line landmarks with two Point3 endpoints) with Huber kernels, culling.
 
 ``LocalMapper`` owns keyframes, landmarks and their observations (covisibility is derived
 from shared observations). ``insert_keyframe(KeyframeData) -> LocalMapUpdate`` is the
@@ -13,14 +14,19 @@ from dataclasses import dataclass, field
 import gtsam
 import numpy as np
 
+from canopy.backend.line_factors import (line_custom_factor, line_projection_factors,
+                                         line_projection_measurements, right_shift)
 from canopy.backend.params import MappingParams
 from canopy.frontend.geometry import se3_inv
 from canopy.frontend.matching import as_words, _popcount64
 from canopy.frontend.messages import KeyframeData, LocalMapUpdate
+from canopy.lines import line_coefficients
 from shared.types import StereoCalibration, Trajectory
 
 X = gtsam.symbol_shorthand.X
 L = gtsam.symbol_shorthand.L
+EA = gtsam.symbol_shorthand.A  # line landmark start point
+EB = gtsam.symbol_shorthand.B  # line landmark end point
 
 
 def _ms(t0: float) -> float:
@@ -39,6 +45,11 @@ class Keyframe:
     landmark: np.ndarray      # (N,) landmark id observed by keypoint i, -1 for none
     segment: int
     order: int                # insertion counter (ages of landmarks are counted in keyframes)
+    # line observations (empty without lines): infinite lines of the left / right segments
+    line_coeffs: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    line_coeffs_right: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # NaN: no stereo
+    line_descriptors: np.ndarray = field(default_factory=lambda: np.zeros((0, 32), np.uint8))
+    line_landmark: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
 
 @dataclass
@@ -51,6 +62,16 @@ class Landmark:
     segment: int = 0
     visible: int = 1
     found: int = 1
+
+
+@dataclass
+class LineLandmark:
+    id: int
+    endpoints: np.ndarray                              # (2,3) A, B in world
+    descriptor: np.ndarray                             # (32,) LBD of the latest observation
+    obs: dict[int, int] = field(default_factory=dict)  # keyframe index -> line row
+    first_order: int = 0
+    segment: int = 0
 
 
 class LocalMapper:
@@ -67,6 +88,8 @@ class LocalMapper:
         self._noise_cache: dict[tuple[bool, int, float], gtsam.noiseModel.Base] = {}
         self.timings: list[dict[str, float]] = []
         self.n_culled = 0
+        self.lines: dict[int, LineLandmark] = {}
+        self.n_lines_culled = 0
 
     # ----------------------------------------------------------------- public API
     def insert_keyframe(self, kf: KeyframeData) -> LocalMapUpdate:
@@ -106,6 +129,12 @@ class LocalMapper:
         if not self.landmarks:
             return np.zeros((0, 3))
         return np.array([lm.position for lm in self.landmarks.values()], float)
+
+    def map_lines(self) -> np.ndarray:
+        """(L,2,3) endpoints A, B (world) of every line landmark, in id order."""
+        if not self.lines:
+            return np.zeros((0, 2, 3))
+        return np.array([self.lines[i].endpoints for i in sorted(self.lines)], float)
 
     # ----------------------------------------------------------------- insertion
     def _insert(self, kf: KeyframeData) -> Keyframe:
@@ -150,7 +179,33 @@ class LocalMapper:
             rec.landmark[i] = lid
         for lm in touched:
             self._update_descriptor(lm)
+        if self.params.use_lines:
+            self._insert_lines(kf, rec)
         return rec
+
+    def _insert_lines(self, kf: KeyframeData, rec: Keyframe) -> None:
+        """Line observations of existing line landmarks, and new lines from stereo endpoints."""
+        n = len(kf.line_ids)
+        rec.line_coeffs = line_coefficients(np.asarray(kf.line_segments, np.float64).reshape(-1, 4))
+        with np.errstate(invalid="ignore"):
+            rec.line_coeffs_right = line_coefficients(np.asarray(kf.line_segments_right, np.float64).reshape(-1, 4))
+        rec.line_descriptors = np.asarray(kf.line_descriptors, np.uint8).reshape(-1, 32)
+        rec.line_landmark = np.full(n, -1, np.int64)
+        for j in np.flatnonzero(kf.line_ids >= 0).tolist():
+            ln = self.lines.get(int(kf.line_ids[j]))
+            if ln is None or ln.segment != self._segment or kf.index in ln.obs:
+                continue
+            ln.obs[kf.index] = j
+            ln.descriptor = rec.line_descriptors[j].copy()
+            rec.line_landmark[j] = ln.id
+        P = np.asarray(kf.line_endpoints_cam, np.float64).reshape(-1, 2, 3)
+        idx = np.flatnonzero((kf.new_line_ids >= 0) & (rec.line_landmark < 0) & np.isfinite(P).all(axis=(1, 2)))
+        Pw = (P[idx].reshape(-1, 3) @ rec.T_world_cam[:3, :3].T + rec.T_world_cam[:3, 3]).reshape(-1, 2, 3)
+        for j, i in enumerate(idx.tolist()):
+            lid = int(kf.new_line_ids[i])
+            self.lines[lid] = LineLandmark(lid, Pw[j], rec.line_descriptors[i].copy(), {kf.index: i},
+                                           first_order=rec.order, segment=self._segment)
+            rec.line_landmark[i] = lid
 
     def _update_descriptor(self, lm: Landmark) -> None:
         """ORB-SLAM's distinctive descriptor: the observation with the least median distance."""
@@ -168,6 +223,11 @@ class LocalMapper:
             for k in self.landmarks[lid].obs:
                 if k != rec.index:
                     counts[k] = counts.get(k, 0) + 1
+        if self.params.use_lines:  # shared line landmarks make keyframes covisible too
+            for lid in rec.line_landmark[rec.line_landmark >= 0].tolist():
+                for k in self.lines[lid].obs:
+                    if k != rec.index:
+                        counts[k] = counts.get(k, 0) + 1
         return counts
 
     def _local_window(self, rec: Keyframe) -> tuple[list[int], list[int]]:
@@ -207,7 +267,8 @@ class LocalMapper:
         p = self.params
         kf_set = set(local) | set(fixed)
         lm_ids = sorted({lid for k in local for lid in self.keyframes[k].landmark[self.keyframes[k].landmark >= 0].tolist()})
-        if not lm_ids:
+        lines = self._line_edges(local, kf_set) if p.use_lines else None
+        if not lm_ids and (lines is None or len(lines[0]) == 0):
             return
         # edges: (kf, landmark, keypoint)
         e_kf, e_lm, e_kp = [], [], []
@@ -236,6 +297,12 @@ class LocalMapper:
             values.insert(X(k), gtsam.Pose3(self.keyframes[k].T_world_cam))
         for lid in lm_ids:
             values.insert(L(lid), self.landmarks[lid].position)
+        if lines is not None:
+            l_kf, l_id, l_coef, l_right = lines
+            l_active = np.ones(len(l_kf), bool)
+            for lid in np.unique(l_id).tolist():
+                values.insert(EA(lid), self.lines[lid].endpoints[0])
+                values.insert(EB(lid), self.lines[lid].endpoints[1])
         fixed_noise = gtsam.noiseModel.Isotropic.Sigma(6, p.fixed_pose_sigma)
         for _ in range(p.ba_passes):
             graph = gtsam.NonlinearFactorGraph()
@@ -250,12 +317,20 @@ class LocalMapper:
                     graph.add(gtsam.GenericProjectionFactorCal3_S2(
                         gtsam.Point2(uv[j, 0], uv[j, 1]), self._noise(False, int(octv[j]), scale),
                         X(int(e_kf[j])), L(int(e_lm[j])), self._Kmono))
+            if lines is not None:
+                self._add_line_factors(graph, values, l_kf[l_active], l_id[l_active], l_coef[l_active],
+                                       l_right[l_active])
             lm_params = gtsam.LevenbergMarquardtParams()
             lm_params.setMaxIterations(p.ba_iterations)
             values = gtsam.LevenbergMarquardtOptimizer(graph, values, lm_params).optimize()
             chi2 = self._edge_chi2(values, e_kf, e_lm, uv, ur, stereo, octv, scale)
             bad = chi2 > np.where(stereo, p.chi2_stereo, p.chi2_mono)
-            if not (active & bad).any():
+            l_bad_new = False
+            if lines is not None:
+                l_bad = self._line_edge_chi2(values, l_kf, l_id, l_coef, l_right) > p.chi2_line
+                l_bad_new = bool((l_active & l_bad).any())
+                l_active &= ~l_bad
+            if not (active & bad).any() and not l_bad_new:
                 break
             active &= ~bad
         # write back poses and points, drop outlier observations (ORB-SLAM removes them)
@@ -263,10 +338,104 @@ class LocalMapper:
             self.keyframes[k].T_world_cam = values.atPose3(X(k)).matrix()
         for lid in lm_ids:
             self.landmarks[lid].position = np.asarray(values.atPoint3(L(lid)), float)
-        chi2 = self._edge_chi2(values, e_kf, e_lm, uv, ur, stereo, octv, scale)
-        bad = ~active | (chi2 > np.where(stereo, p.chi2_stereo, p.chi2_mono))
-        for j in np.flatnonzero(bad).tolist():
-            self._remove_observation(int(e_lm[j]), int(e_kf[j]))
+        if lm_ids:
+            chi2 = self._edge_chi2(values, e_kf, e_lm, uv, ur, stereo, octv, scale)
+            bad = ~active | (chi2 > np.where(stereo, p.chi2_stereo, p.chi2_mono))
+            for j in np.flatnonzero(bad).tolist():
+                self._remove_observation(int(e_lm[j]), int(e_kf[j]))
+        if lines is not None and len(l_kf):
+            for lid in np.unique(l_id).tolist():
+                self.lines[lid].endpoints = np.stack([np.asarray(values.atPoint3(EA(lid)), float),
+                                                      np.asarray(values.atPoint3(EB(lid)), float)])
+            l_bad = ~l_active | (self._line_edge_chi2(values, l_kf, l_id, l_coef, l_right) > p.chi2_line)
+            for j in np.flatnonzero(l_bad).tolist():
+                self._remove_line_observation(int(l_id[j]), int(l_kf[j]), bool(l_right[j]))
+
+    # ----------------------------------------------------------------- line terms (Eq. 10)
+    def _line_edges(self, local: list[int], kf_set: set[int]):
+        """Line edges of the lines seen by the local keyframes: (keyframe, line id, line
+        coefficients, right image?) for every observation in ``kf_set``. Lines with fewer than
+        two edges (one view of an infinite line does not fix it) stay out of BA."""
+        ids = sorted({lid for k in local for lid in self.keyframes[k].line_landmark.tolist() if lid >= 0})
+        e_kf, e_id, e_coef, e_right = [], [], [], []
+        for lid in ids:
+            rows = []
+            for k, j in self.lines[lid].obs.items():
+                if k not in kf_set:
+                    continue
+                kf = self.keyframes[k]
+                rows.append((k, kf.line_coeffs[j], False))
+                if np.isfinite(kf.line_coeffs_right[j]).all():
+                    rows.append((k, kf.line_coeffs_right[j], True))
+            if len(rows) >= 2:
+                for k, c, r in rows:
+                    e_kf.append(k)
+                    e_id.append(lid)
+                    e_coef.append(c)
+                    e_right.append(r)
+        return (np.asarray(e_kf, np.int64), np.asarray(e_id, np.int64), np.asarray(e_coef, float).reshape(-1, 3),
+                np.asarray(e_right, bool))
+
+    def _add_line_factors(self, graph, values, l_kf, l_id, l_coef, l_right) -> None:
+        p = self.params
+        if len(l_kf) == 0:
+            return
+        if p.line_factor == "custom":
+            noise = self._line_noise()
+            for k, lid, c, r in zip(l_kf.tolist(), l_id.tolist(), l_coef, l_right.tolist()):
+                graph.add(line_custom_factor(X(k), EA(lid), EB(lid), c, self.calib, noise, right=r))
+            return
+        T_wc = {k: values.atPose3(X(k)).matrix() for k in np.unique(l_kf).tolist()}
+        T = np.stack([T_wc[k] for k in l_kf.tolist()])
+        for which, key in ((0, EA), (1, EB)):
+            P = np.array([values.atPoint3(key(lid)) for lid in l_id.tolist()], float).reshape(-1, 3)
+            feet, infos = line_projection_measurements(T, P, l_coef, self.calib, l_right, p.line_sigma,
+                                                       p.line_sigma_along)
+            for f in line_projection_factors([X(k) for k in l_kf.tolist()], [key(lid) for lid in l_id.tolist()],
+                                             feet, infos, l_right, self._Kmono, self.calib, p.huber_line):
+                graph.add(f)
+
+    def _line_noise(self):
+        m = self._noise_cache.get(("line",))
+        if m is None:
+            base = gtsam.noiseModel.Isotropic.Sigma(2, self.params.line_sigma)
+            m = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(self.params.huber_line), base)
+            self._noise_cache[("line",)] = m
+        return m
+
+    def _line_edge_chi2(self, values, l_kf, l_id, l_coef, l_right) -> np.ndarray:
+        """Eq. 11 line term of every edge: (d_A^2 + d_B^2) / line_sigma^2 (inf if behind)."""
+        if len(l_kf) == 0:
+            return np.zeros(0)
+        T_cw = {k: se3_inv(values.atPose3(X(k)).matrix()) for k in np.unique(l_kf).tolist()}
+        R = np.stack([T_cw[k][:3, :3] for k in l_kf.tolist()])
+        t = np.stack([T_cw[k][:3, 3] for k in l_kf.tolist()])
+        t = t + np.where(l_right[:, None], right_shift(self.calib)[:3, 3], 0.0)
+        uniq, inv = np.unique(l_id, return_inverse=True)
+        chi2 = np.zeros(len(l_kf))
+        front = np.ones(len(l_kf), bool)
+        for key in (EA, EB):
+            P = np.array([values.atPoint3(key(l)) for l in uniq.tolist()], float).reshape(-1, 3)[inv]
+            Pc = np.einsum("nij,nj->ni", R, P) + t
+            z = Pc[:, 2]
+            front &= z > self.params.min_depth
+            with np.errstate(divide="ignore", invalid="ignore"):
+                u = self.calib.fx * Pc[:, 0] / z + self.calib.cx
+                v = self.calib.fy * Pc[:, 1] / z + self.calib.cy
+            chi2 += (l_coef[:, 0] * u + l_coef[:, 1] * v + l_coef[:, 2]) ** 2
+        chi2 /= self.params.line_sigma**2
+        chi2[~front | ~np.isfinite(chi2)] = np.inf
+        return chi2
+
+    def _remove_line_observation(self, lid: int, k: int, right: bool) -> None:
+        ln = self.lines.get(lid)
+        if ln is None or k not in ln.obs:
+            return
+        if right:  # only the right-image half of the observation is bad
+            self.keyframes[k].line_coeffs_right[ln.obs[k]] = np.nan
+            return
+        j = ln.obs.pop(k)
+        self.keyframes[k].line_landmark[j] = -1
 
     def _edge_chi2(self, values, e_kf, e_lm, uv, ur, stereo, octv, scale) -> np.ndarray:
         """Whitened squared reprojection error of every edge (inf if behind the camera)."""
@@ -317,6 +486,27 @@ class LocalMapper:
                 bad.append(lid)
         for lid in bad:
             self._delete_landmark(lid)
+        if p.use_lines:
+            self._cull_lines(rec)
+
+    def _cull_lines(self, rec: Keyframe) -> None:
+        """Lines left unobserved, or recent lines not re-observed by line_min_observations keyframes."""
+        p = self.params
+        bad = []
+        for lid, ln in self.lines.items():
+            if not ln.obs:
+                bad.append(lid)
+                continue
+            age = rec.order - ln.first_order
+            if ln.segment != rec.segment or age > p.recent_age_keyframes:
+                continue
+            if age >= p.cull_age_keyframes and len(ln.obs) < p.line_min_observations:
+                bad.append(lid)
+        for lid in bad:
+            ln = self.lines.pop(lid)
+            for k, j in ln.obs.items():
+                self.keyframes[k].line_landmark[j] = -1
+            self.n_lines_culled += 1
 
     # ----------------------------------------------------------------- update for tracking
     def _make_update(self, rec: Keyframe, local: list[int], fixed: list[int]) -> LocalMapUpdate:
@@ -325,4 +515,11 @@ class LocalMapper:
         pos = np.array([self.landmarks[i].position for i in ids], float).reshape(-1, 3)
         desc = np.array([self.landmarks[i].descriptor for i in ids], np.uint8).reshape(-1, 32)
         poses = {k: self.keyframes[k].T_world_cam.copy() for k in local}
-        return LocalMapUpdate(rec.index, np.asarray(ids, np.int64), pos, desc, poses)
+        update = LocalMapUpdate(rec.index, np.asarray(ids, np.int64), pos, desc, poses)
+        if self.params.use_lines:
+            lids = sorted({lid for k in list(local) + list(fixed)
+                           for lid in self.keyframes[k].line_landmark.tolist() if lid >= 0})
+            update.line_ids = np.asarray(lids, np.int64)
+            update.line_endpoints = np.array([self.lines[i].endpoints for i in lids], float).reshape(-1, 2, 3)
+            update.line_descriptors = np.array([self.lines[i].descriptor for i in lids], np.uint8).reshape(-1, 32)
+        return update

@@ -27,6 +27,22 @@ class MappingParams:
     min_found_ratio: float = 0.25        # found / visible (ORB-SLAM MapPointCulling)
     min_depth: float = 0.05              # m; landmarks behind or on a camera are dropped
     fixed_pose_sigma: float = 1e-6       # prior sigma holding fixed keyframes (rad, m)
+    # --- line landmarks in local BA (AGRI Eq. 10-11; issue 4) ---------------------------
+    # Off: points-only BA, unchanged. On: each line landmark is two Point3 endpoints; every
+    # observation adds Eq. 10 (distances of the projected endpoints to the observed infinite
+    # line; also in the right image where the keyframe matched the line in stereo).
+    use_lines: bool = False
+    # "projection": one GenericProjectionFactor per endpoint whose measurement is the foot of
+    # the perpendicular on the observed line, with a noise model tight along the line normal
+    # (line_sigma) and loose along the line (line_sigma_along): its whitened error is Eq. 10
+    # up to the tiny along-line term, and it runs in C++. "custom": gtsam.CustomFactor with
+    # the exact Eq. 10 residual and analytic Jacobians (Python callback; slower).
+    line_factor: str = "projection"
+    line_sigma: float = 1.0              # px, per endpoint-to-line distance
+    line_sigma_along: float = 1e3        # px, along the observed line ("projection" only)
+    huber_line: float = math.sqrt(CHI2_95_2DOF)
+    chi2_line: float = CHI2_95_2DOF      # line observation outlier threshold after BA
+    line_min_observations: int = 2       # keyframes that must see a line once it is old enough
 
     def validate(self) -> "MappingParams":
         def need(ok: bool, name: str, what: str) -> None:
@@ -47,6 +63,10 @@ class MappingParams:
         need(0 <= self.min_found_ratio <= 1, "min_found_ratio", "must be in [0, 1]")
         need(self.min_depth > 0, "min_depth", "must be > 0")
         need(self.fixed_pose_sigma > 0, "fixed_pose_sigma", "must be > 0")
+        need(self.line_factor in ("projection", "custom"), "line_factor", "must be 'projection' or 'custom'")
+        need(self.line_sigma > 0 and self.line_sigma_along > 0, "line_sigma", "and line_sigma_along must be > 0")
+        need(self.huber_line > 0 and self.chi2_line > 0, "huber_line", "and chi2_line must be > 0")
+        need(self.line_min_observations >= 1, "line_min_observations", "must be >= 1")
         return self
 
     def __post_init__(self):

@@ -34,3 +34,6 @@ class TrackingResult:
     # pose); with the keyframe's final pose it gives the frame's final pose. None when lost.
     T_ref_cam: np.ndarray | None = None
     keyframe_reason: str = ""    # which keyframe condition(s) fired: entropy, max_frames, ...
+    n_lines: int = 0             # left segments detected (0 when tracking runs without lines)
+    n_line_matches: int = 0      # segments matched to map lines
+    n_line_inliers: int = 0      # line matches kept by the pose refinement

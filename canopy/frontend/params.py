@@ -82,6 +82,27 @@ class TrackingParams:
     min_tracked_close: int = 100
     min_init_points: int = 100          # stereo points needed to (re)start a map
 
+    # --- line features in tracking (AGRI §3.2.1-3.2.3, Eq. 10-11; issue 4) -----------
+    # Off: the points-only pipeline runs unchanged. On: FLD/LSD segments of the left image
+    # are detected and LBD-described in a worker thread while ORB and stereo run; the right
+    # image's lines are detected only at keyframes (stereo lines create map lines there).
+    use_lines: bool = False
+    line_detector: str = "fld"
+    line_max_lines: int = 100           # longest segments kept per image (LBD cost ~ count)
+    line_min_length_fraction: float = 0.03  # of the image diagonal (27 px at 752x480)
+    # Lines are detected and LBD-described on the image resized by this factor (FLD + LBD cost
+    # ~ pixels; at 0.5 they cost ~6 ms instead of ~15 ms at 752x480); endpoints are mapped back.
+    line_image_scale: float = 0.5
+    line_search_radius: float = 15.0    # px: observed endpoints to the projected map line
+    line_search_radius_wide: float = 40.0  # px, when the pose comes from the prediction only
+    line_max_angle_deg: float = 10.0    # directed angle, projected map line vs segment
+    line_max_hamming: int = 80          # LBD, of 256 bits
+    line_ratio: float = 0.85            # best / second-best Hamming distance
+    line_sigma: float = 1.0             # px, sigma of each endpoint-to-line distance (Eq. 11)
+    chi2_line: float = 5.991            # 95% of chi2(2): both endpoint distances of one line
+    line_max_depth_baselines: float = 60.0  # new map lines: both endpoints closer than this
+    line_weight_in_count: int = 1       # a line inlier counts as this many point inliers
+
     def validate(self) -> "TrackingParams":
         def need(ok: bool, name: str, what: str) -> None:
             if not ok:
@@ -120,6 +141,18 @@ class TrackingParams:
              "max_frames_between_keyframes", "must exceed min_frames_between_keyframes")
         need(0 < self.min_tracked_fraction <= 1, "min_tracked_fraction", "must be in (0, 1]")
         need(self.min_init_points >= self.min_inliers, "min_init_points", "must be >= min_inliers")
+        need(self.line_detector in ("fld", "lsd"), "line_detector", "must be 'fld' or 'lsd'")
+        need(self.line_max_lines > 0, "line_max_lines", "must be > 0")
+        need(0.25 <= self.line_image_scale <= 1.0, "line_image_scale", "must be in [0.25, 1]")
+        need(0 < self.line_min_length_fraction < 1, "line_min_length_fraction", "must be in (0, 1)")
+        need(0 < self.line_search_radius <= self.line_search_radius_wide, "line_search_radius",
+             "must be in (0, line_search_radius_wide]")
+        need(0 < self.line_max_angle_deg < 90, "line_max_angle_deg", "must be in (0, 90)")
+        need(0 <= self.line_max_hamming <= 256, "line_max_hamming", "must be in [0, 256]")
+        need(0 < self.line_ratio <= 1, "line_ratio", "must be in (0, 1]")
+        need(self.line_sigma > 0 and self.chi2_line > 0, "line_sigma", "and chi2_line must be > 0")
+        need(self.line_max_depth_baselines > 0, "line_max_depth_baselines", "must be > 0")
+        need(self.line_weight_in_count >= 0, "line_weight_in_count", "must be >= 0")
         return self
 
     def __post_init__(self):

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import time
 from concurrent.futures import ThreadPoolExecutor
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -22,6 +23,9 @@ from canopy.frontend.params import TrackingParams
 from canopy.frontend.pose import refine_pose
 from canopy.frontend.stereo import StereoMatches, match_stereo
 from shared.types import StereoCalibration, StereoFrame
+
+if TYPE_CHECKING:
+    from canopy.frontend.line_tracking import LineFrame
 
 STATUS_INIT, STATUS_OK, STATUS_LOST = "init", "ok", "lost"
 
@@ -84,6 +88,29 @@ class Tracker:
         self._ref_tracked_first: int | None = None
         self._seen: list[tuple[np.ndarray, np.ndarray]] = []
         self.n_lost = 0
+        # line features (issue 4), all inert unless params.use_lines
+        self._lines_on = bool(self.params.use_lines)
+        if self._lines_on:
+            # imported here: canopy.lines builds on canopy.frontend.geometry, so a module-level
+            # import would make the two packages import each other
+            from canopy.frontend import line_tracking
+            from canopy.lines import LineDescriber, LineParams, detect_segments, match_stereo_lines
+            self._lt = line_tracking
+            self._detect_segments, self._match_stereo_lines = detect_segments, match_stereo_lines
+            p = self.params
+            self.line_params = LineParams(detector=p.line_detector, max_lines=p.line_max_lines,
+                                          min_length_fraction=p.line_min_length_fraction)
+            # one describer per thread: the left image is described in the worker
+            self._line_describer = LineDescriber(self.line_params)
+            self._line_describer_right = LineDescriber(self.line_params)
+            self._line_pool = ThreadPoolExecutor(max_workers=1)
+            self._line_update_view = line_tracking.LineMapView()
+            self._line_provisional: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+            self._line_view = line_tracking.LineMapView()
+            self._line_view_dirty = False
+            self._next_line_id = 0
+            self._ref_line_ids = np.zeros(0, np.int64)
+            self._line_max_depth = p.line_max_depth_baselines * calib.baseline
 
     # ------------------------------------------------------------------ map view
     def apply_map_update(self, update: LocalMapUpdate) -> None:
@@ -94,6 +121,11 @@ class Tracker:
         for k in [k for k in self._provisional if k <= update.keyframe_index]:
             del self._provisional[k]
         self._view_dirty = True
+        if self._lines_on:
+            self._line_update_view.set(update.line_ids, update.line_endpoints, update.line_descriptors)
+            for k in [k for k in self._line_provisional if k <= update.keyframe_index]:
+                del self._line_provisional[k]
+            self._line_view_dirty = True
         if self._ref_kf in update.keyframe_poses:
             T_new = np.asarray(update.keyframe_poses[self._ref_kf], float)
             C = T_new @ se3_inv(self._T_ref)  # world correction of the reference keyframe
@@ -115,6 +147,33 @@ class Tracker:
             self._view_dirty = False
         return self._view
 
+    def _line_map_view(self):
+        if self._line_view_dirty:
+            parts = [(self._line_update_view.ids, self._line_update_view.endpoints, self._line_update_view.desc)]
+            parts += [self._line_provisional[k] for k in sorted(self._line_provisional)]
+            ids = np.concatenate([q[0] for q in parts])
+            _, first = np.unique(ids, return_index=True)
+            first = np.sort(first)
+            self._line_view.set(ids[first], np.concatenate([q[1] for q in parts])[first],
+                                np.concatenate([q[2] for q in parts])[first])
+            self._line_view_dirty = False
+        return self._line_view
+
+    def _detect_lines(self, image: np.ndarray, right: bool = False) -> LineFrame:
+        """Segments + LBD of one image (AGRI §3.2.1); runs in the line worker for the left image."""
+        t0 = time.perf_counter()
+        scale = self.params.line_image_scale
+        if scale != 1.0:  # detect and describe on a reduced image, endpoints back in full-size pixels
+            image = cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+        segs, stats = self._detect_segments(image, self.line_params)
+        t1 = time.perf_counter()
+        desc = (self._line_describer_right if right else self._line_describer)(image, segs)
+        if scale != 1.0:
+            segs = (segs.astype(np.float64) + 0.5) / scale - 0.5  # pixel centres of the INTER_AREA grid
+        stats["detect_ms"] = (t1 - t0) * 1e3
+        stats["describe_ms"] = _ms(t1)
+        return self._lt.LineFrame.build(segs, desc, stats)
+
     # ------------------------------------------------------------------ helpers
     def _sigma(self, octave: np.ndarray) -> np.ndarray:
         return self.params.pixel_sigma * self.scale_factors[octave]
@@ -135,6 +194,7 @@ class Tracker:
     def track(self, frame: StereoFrame, fast_threshold: int | None = None) -> TrackingResult:
         timings: dict[str, float] = {}
         t_all = time.perf_counter()
+        line_job = self._line_pool.submit(self._detect_lines, frame.left) if self._lines_on else None
         t0 = time.perf_counter()
         if self._pool is not None:
             right_job = self._pool.submit(self.extractor_right.extract, frame.right, fast_threshold)
@@ -149,17 +209,25 @@ class Tracker:
         timings["stereo"] = _ms(t0)
         n_stereo = int(stereo.valid.sum())
 
+        lines = None
+        if line_job is not None:
+            t0 = time.perf_counter()
+            lines = line_job.result()
+            timings["lines_wait"] = _ms(t0)  # what the worker's detection + LBD cost beyond ORB/stereo
+            timings["lines_detect_worker"] = lines.stats["detect_ms"]
+            timings["lines_describe_worker"] = lines.stats["describe_ms"]
         if not self._initialised or self._need_restart:
-            res = self._initialise(frame, left, stereo, n_stereo)
+            res = self._initialise(frame, left, stereo, n_stereo, lines)
         else:
-            res = self._track_frame(frame, left, stereo, timings)
+            res = self._track_frame(frame, left, stereo, timings, lines)
         res.n_stereo = n_stereo
         timings["total"] = _ms(t_all)
         res.timings = timings
         return res
 
     # ------------------------------------------------------------------ (re)initialisation
-    def _initialise(self, frame: StereoFrame, feats: Features, stereo: StereoMatches, n_stereo: int) -> TrackingResult:
+    def _initialise(self, frame: StereoFrame, feats: Features, stereo: StereoMatches, n_stereo: int,
+                    lines: LineFrame | None = None) -> TrackingResult:
         T_wc = self._T_last.copy()  # first frame: initial pose; restart: last good pose
         if n_stereo < self.params.min_init_points:
             self.n_lost += 1
@@ -174,15 +242,54 @@ class Tracker:
         self._provisional.clear()
         self._segment_start_kf = frame.index
         self._last_matched = (np.zeros((0, 3)), as_words(np.zeros((0, 32), np.uint8)), np.zeros(0, np.int64))
+        if self._lines_on:
+            self._line_update_view.set(np.zeros(0, np.int64), np.zeros((0, 2, 3)), np.zeros((0, 32), np.uint8))
+            self._line_provisional.clear()
+            self._line_view_dirty = True
         matched_ids = np.full(len(feats), -1, np.int64)
-        kf = self._make_keyframe(frame, feats, stereo, T_wc, matched_ids, restart=restart)
+        line_matched = None if lines is None else np.full(len(lines), -1, np.int64)
+        kf = self._make_keyframe(frame, feats, stereo, T_wc, matched_ids, restart=restart, lines=lines,
+                                 line_matched=line_matched)
         ids, pos, desc = self._provisional[frame.index]
         self._last_matched = (pos, as_words(desc), ids)
         self._after_frame(T_wc, feats, stereo)
         return TrackingResult(frame.index, frame.timestamp, T_wc, STATUS_INIT, int((kf.new_landmark_ids >= 0).sum()),
                               0, True, kf, frame.index, T_ref_cam=np.eye(4))
 
-    def _make_keyframe(self, frame, feats, stereo, T_wc, matched_ids, restart=False) -> KeyframeData:
+    def _keyframe_lines(self, frame: StereoFrame, lines: LineFrame, line_matched: np.ndarray, T_wc: np.ndarray) -> dict:
+        """Line fields of the keyframe: matched map lines plus new stereo lines (AGRI §3.2.2).
+
+        The right image is detected and described only here (stereo is needed only at
+        keyframes); new lines are stereo matches not matched to a map line, with both
+        endpoints in front and closer than ``line_max_depth_baselines`` baselines.
+        """
+        n = len(lines)
+        right = self._detect_lines(frame.right, right=True)
+        st = self._match_stereo_lines(lines.segs, lines.desc, right.segs, right.desc, self.calib, self.line_params)
+        seg_r = np.full((n, 4), np.nan)
+        P_cam = np.full((n, 2, 3), np.nan)
+        seg_r[st.left_idx] = right.segs[st.right_idx]
+        P_cam[st.left_idx] = st.points_cam
+        z = P_cam[:, :, 2]
+        with np.errstate(invalid="ignore"):
+            stereo_ok = np.isfinite(z).all(axis=1) & (z > 0).all(axis=1) & (z < self._line_max_depth).all(axis=1)
+        create = stereo_ok & (line_matched < 0)
+        idx = np.flatnonzero(create)
+        new_ids = np.full(n, -1, np.int64)
+        new_ids[idx] = self._next_line_id + np.arange(len(idx))
+        self._next_line_id += len(idx)
+        ends_w = transform(T_wc, P_cam[idx].reshape(-1, 3)).reshape(-1, 2, 3)
+        self._line_provisional[frame.index] = (new_ids[idx], ends_w, lines.desc[idx])
+        self._line_view_dirty = True
+        rows = np.flatnonzero((line_matched >= 0) | create)
+        self._ref_line_ids = np.unique(np.concatenate([line_matched[line_matched >= 0], new_ids[idx]]))
+        return dict(line_segments=lines.segs[rows].astype(np.float32),
+                    line_segments_right=seg_r[rows].astype(np.float32),
+                    line_descriptors=lines.desc[rows].copy(), line_ids=line_matched[rows].copy(),
+                    new_line_ids=new_ids[rows], line_endpoints_cam=P_cam[rows])
+
+    def _make_keyframe(self, frame, feats, stereo, T_wc, matched_ids, restart=False, lines=None,
+                       line_matched=None) -> KeyframeData:
         """Build the keyframe payload; reserve ids for new close stereo landmarks."""
         new_ids = np.full(len(feats), -1, np.int64)
         create = self._landmark_candidates(stereo) & (matched_ids < 0)
@@ -202,13 +309,14 @@ class Tracker:
             uids = np.zeros(0, np.int64)
             seen_visible = seen_found = np.zeros(0, np.int32)
         self._seen = []
+        line_fields = {} if lines is None else self._keyframe_lines(frame, lines, line_matched, T_wc)
         kf = KeyframeData(
             index=frame.index, timestamp=frame.timestamp, T_world_cam=T_wc.copy(),
             uv=feats.uv.astype(np.float32), u_right=stereo.u_right.astype(np.float32),
             depth=stereo.depth.astype(np.float32), descriptors=feats.descriptors.copy(),
             octave=feats.octave.astype(np.int32), landmark_ids=matched_ids.copy(), new_landmark_ids=new_ids,
             scale_factor=self.params.scale_factor, restart=restart,
-            seen_ids=uids, seen_visible=seen_visible, seen_found=seen_found)
+            seen_ids=uids, seen_visible=seen_visible, seen_found=seen_found, **line_fields)
         self._ref_kf = frame.index
         self._T_ref = T_wc.copy()
         self._ref_ids = np.unique(np.concatenate([matched_ids[matched_ids >= 0], new_ids[idx]]))
@@ -283,13 +391,28 @@ class Tracker:
         mask[inl.reshape(-1)] = True
         return pose_from_rvec(rvec, tvec), mask
 
-    def _refine(self, T_cw, X, r, feats: Features, stereo: StereoMatches, inliers=None):
+    def _refine(self, T_cw, X, r, feats: Features, stereo: StereoMatches, inliers=None, line_obs=None):
+        """Motion-only refinement; with ``line_obs`` = (A_w, B_w, line coefficients) the Eq. 10
+        line terms join the point terms (Eq. 11 with the map fixed)."""
         p = self.params
         meas = np.concatenate([feats.uv[r].astype(np.float64), stereo.u_right[r, None].astype(np.float64)], axis=1)
-        return refine_pose(T_cw, X, meas, stereo.valid[r], self._sigma(feats.octave[r]), self.calib,
-                           p.pose_opt_rounds, p.pose_opt_iterations, p.chi2_mono, p.chi2_stereo, inliers=inliers)
+        if line_obs is None:
+            return refine_pose(T_cw, X, meas, stereo.valid[r], self._sigma(feats.octave[r]), self.calib,
+                               p.pose_opt_rounds, p.pose_opt_iterations, p.chi2_mono, p.chi2_stereo, inliers=inliers)
+        A_w, B_w, coeffs = line_obs
+        return self._lt.refine_pose_points_lines(T_cw, X, meas, stereo.valid[r], self._sigma(feats.octave[r]), self.calib,
+                                                 p.pose_opt_rounds, p.pose_opt_iterations, p.chi2_mono, p.chi2_stereo,
+                                                 A_w, B_w, coeffs, p.line_sigma, p.chi2_line, inliers=inliers)
 
-    def _track_frame(self, frame: StereoFrame, feats: Features, stereo: StereoMatches, timings) -> TrackingResult:
+    def _n_support(self, est) -> int:
+        """Inlier count deciding success: points, plus lines (x line_weight_in_count) when on."""
+        n = int(est.inliers.sum())
+        if self._lines_on and hasattr(est, "line_inliers"):
+            n += self.params.line_weight_in_count * int(est.line_inliers.sum())
+        return n
+
+    def _track_frame(self, frame: StereoFrame, feats: Features, stereo: StereoMatches, timings,
+                     lines: LineFrame | None = None) -> TrackingResult:
         p = self.params
         T_pred_cw = se3_inv(self._T_last @ self._velocity)  # constant-velocity prediction
         kp_words = as_words(feats.descriptors)
@@ -301,26 +424,47 @@ class Tracker:
         t0 = time.perf_counter()
         T_cw, inliers = self._ransac(frame.index, X, feats.uv[r])
         timings["pnp"] = _ms(t0)
+        lview = self._line_map_view() if lines is not None else None
+        from_prediction = False
+        if T_cw is None and lview is not None and len(lview):
+            # too few points for RANSAC: start from the constant-velocity prediction and let the
+            # line terms carry the pose (robust rounds sort out the stage-1 point outliers)
+            T_cw, inliers, from_prediction = T_pred_cw, np.ones(len(X), bool), True
 
         t0 = time.perf_counter()
         est = None
         visible_ids = np.zeros(0, np.int64)
+        line_obs = lq = lr = None
         if T_cw is not None:
+            n_lines = 0
+            if lview is not None:
+                t1 = time.perf_counter()
+                radius = p.line_search_radius_wide if from_prediction else p.line_search_radius
+                lq, lr, _ = self._lt.match_map_lines(T_cw, lview, lines, self.calib, radius, p.line_max_angle_deg,
+                                            p.line_max_hamming, p.line_ratio)
+                line_obs = (lview.A[lq], lview.B[lq], lines.coeffs[lr])
+                n_lines = p.line_weight_in_count * len(lq)
+                timings["line_match"] = _ms(t1)
+            if from_prediction:
+                # refine on lines + stage-1 points first, then search the local map from there
+                est = self._refine(T_cw, X, r, feats, stereo, inliers=inliers, line_obs=line_obs)
+                T_cw = est.T_cam_world
+                est = None
             # stage 2 (TrackLocalMap): all local-map points through the RANSAC pose, small window
             q2, r2, in_view = self._search(T_cw, view.pos, view.words, feats, kp_words, p.search_radius_local,
                                            scaled=True)
             visible_ids = view.ids[in_view]
-            if len(q2) >= p.min_inliers:
-                est = self._refine(T_cw, view.pos[q2], r2, feats, stereo)
-                if int(est.inliers.sum()) >= p.min_inliers:
+            if len(q2) + n_lines >= p.min_inliers:
+                est = self._refine(T_cw, view.pos[q2], r2, feats, stereo, line_obs=line_obs)
+                if self._n_support(est) >= p.min_inliers:
                     X, r, ids, words = view.pos[q2], r2, view.ids[q2], view.words[q2]
                 else:
                     est = None
             if est is None:
-                est = self._refine(T_cw, X, r, feats, stereo, inliers=inliers)
+                est = self._refine(T_cw, X, r, feats, stereo, inliers=inliers, line_obs=line_obs)
         timings["track_local_map"] = _ms(t0)
         n_matches = len(r)
-        ok = est is not None and int(est.inliers.sum()) >= p.min_inliers
+        ok = est is not None and self._n_support(est) >= p.min_inliers
         if not ok:
             self.n_lost += 1
             self._need_restart = True
@@ -329,6 +473,12 @@ class Tracker:
             return TrackingResult(frame.index, frame.timestamp, self._T_last.copy(), STATUS_LOST,
                                   0 if est is None else int(est.inliers.sum()), n_matches, False, None, self._ref_kf)
         T_cw, inliers, info = est.T_cam_world, est.inliers, est.information
+        line_matched = ref_lines = None
+        if lines is not None:
+            linl = est.line_inliers
+            line_matched = np.full(len(lines), -1, np.int64)
+            line_matched[lr[linl]] = lview.ids[lq[linl]]
+            ref_lines = linl & np.isin(lview.ids[lq], self._ref_line_ids)
 
         T_wc = se3_inv(T_cw)
         n_inl = int(inliers.sum())
@@ -345,6 +495,8 @@ class Tracker:
         self._frames_since_kf += 1
         from_ref = inliers & np.isin(ids, self._ref_ids)
         n_ref = int(from_ref.sum())
+        if ref_lines is not None:  # the keyframe's own lines constrain the motion too
+            n_ref += p.line_weight_in_count * int(ref_lines.sum())
         entropy = ratio = None
         if n_ref >= p.min_inliers:
             # uncertainty of the motion relative to the last keyframe: the pose information
@@ -353,6 +505,9 @@ class Tracker:
             Pc_all = transform(T_cw, X[inliers])
             J = stereo_pose_jacobian(Pc_all[meas_ref], self.calib)
             info_ref = pose_information(J, self._sigma(feats.octave[r[inliers]][meas_ref]), stereo.valid[r[inliers]][meas_ref])
+            if ref_lines is not None and ref_lines.any():
+                info_ref = info_ref + self._lt.line_information(T_cw, line_obs[0][ref_lines], line_obs[1][ref_lines],
+                                                       line_obs[2][ref_lines], p.line_sigma, self.calib)
             try:
                 entropy = differential_entropy(np.linalg.inv(info_ref))
             except np.linalg.LinAlgError:
@@ -379,7 +534,8 @@ class Tracker:
             reasons.append("close_points")  # ORB-SLAM2 stereo: few tracked close points, many new ones
         need = bool(reasons)
         is_kf = need and since >= p.min_frames_between_keyframes
-        kf = self._make_keyframe(frame, feats, stereo, T_wc, matched_ids) if is_kf else None
+        kf = self._make_keyframe(frame, feats, stereo, T_wc, matched_ids, lines=lines,
+                                 line_matched=line_matched) if is_kf else None
         timings["keyframe"] = _ms(t0)
         ref = self._ref_kf
         T_ref_cam = se3_inv(self._T_ref) @ T_wc
@@ -390,6 +546,11 @@ class Tracker:
                 full_cov = np.linalg.inv(info)
             except np.linalg.LinAlgError:
                 full_cov = None
-        return TrackingResult(frame.index, frame.timestamp, T_wc, STATUS_OK, n_inl, n_matches, is_kf, kf, ref,
-                              pose_covariance=full_cov, entropy=entropy, entropy_ratio=ratio,
-                              T_ref_cam=T_ref_cam, keyframe_reason="+".join(reasons) if is_kf else "")
+        res = TrackingResult(frame.index, frame.timestamp, T_wc, STATUS_OK, n_inl, n_matches, is_kf, kf, ref,
+                             pose_covariance=full_cov, entropy=entropy, entropy_ratio=ratio,
+                             T_ref_cam=T_ref_cam, keyframe_reason="+".join(reasons) if is_kf else "")
+        if lines is not None:
+            res.n_lines = len(lines)
+            res.n_line_matches = len(lq)
+            res.n_line_inliers = int(est.line_inliers.sum())
+        return res
