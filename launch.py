@@ -38,6 +38,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-frames", type=int, default=None, help="process only the first N frames")
     p.add_argument("--enhance", choices=("none", "he", "clahe", "afe", "agri", "auto"), default=None,
                    help="image enhancement before feature extraction (default from the config)")
+    p.add_argument("--lines", action=argparse.BooleanOptionalAction, default=None,
+                   help="track and bundle-adjust line segments (FLD + LBD) as well as ORB points "
+                        "(default from the config: off)")
     p.add_argument("--inspect", default=None, metavar="ENDPOINT",
                    help="publish every event on this ZeroMQ endpoint for remote clients, "
                         "e.g. tcp://0.0.0.0:5560 (see tools/watch_run.py)")
@@ -57,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
         from canopy.app import run_slam
         result = run_slam(args.dataset, path=args.path, config=args.config, out=args.out, clock=args.clock,
                           max_frames=args.max_frames, enhance=args.enhance, inspect=args.inspect,
-                          progress=not args.quiet, preset=args.preset, seed=args.seed)
+                          progress=not args.quiet, preset=args.preset, seed=args.seed, lines=args.lines)
     except CanopyError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

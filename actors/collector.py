@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from canopy.metrics import evaluate_trajectory
-from canopy.report import plot_trajectory_png, write_json, write_ply_points
+from canopy.report import plot_trajectory_png, write_json, write_ply_lines, write_ply_points
 from canopy.trajectory_io import write_tum
 from protocol.messages import ActorError, ActorStats, FramePose, MapSnapshot
 from shared.types import Trajectory
@@ -155,9 +155,13 @@ class RunCollector:
             files["keyframes"] = str(write_tum(out_dir / "keyframes.tum", kfs))
         points = self.snapshot.points if self.snapshot is not None else np.zeros((0, 3), np.float32)
         files["map_points"] = str(write_ply_points(out_dir / "map_points.ply", np.asarray(points, np.float64)))
+        lines = self.snapshot.lines if self.snapshot is not None else np.zeros((0, 2, 3), np.float32)
+        if len(lines):
+            files["map_lines"] = str(write_ply_lines(out_dir / "map_lines.ply", np.asarray(lines, np.float64)))
         metrics = evaluate_trajectory(cam, gt) if len(cam) else {"note": "no frame was tracked"}
         metrics["tracking"] = self.tracking_summary()
         metrics["map_points"] = int(len(points))
+        metrics["map_lines"] = int(len(lines))
         metrics["run"] = run_info
         files["metrics"] = str(write_json(out_dir / "metrics.json", metrics))
         stats = self.stats_summary()
@@ -179,7 +183,7 @@ def format_summary(summary: dict, outcome_reason: str, n_cores: int) -> str:
              f"  frames               {t['frames_processed']}/{t['frames_total']} processed, "
              f"{t['keyframes']} keyframes, {t['frames_lost']} lost",
              f"  tracking success     {t['tracking_success_percent']:.1f} %",
-             f"  map points           {m.get('map_points', 0)}"]
+             f"  map                  {m.get('map_points', 0)} points, {m.get('map_lines', 0)} line segments"]
     ate = m.get("ate")
     if ate and ate.get("rmse") is not None:
         lines.append(f"  ATE (SE3-aligned)    rmse {ate['rmse']:.4f} m   max {ate['max']:.4f} m   (n={ate['n']})")

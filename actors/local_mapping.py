@@ -44,7 +44,8 @@ class LocalMappingActor(Actor):
         kfs = self.mapper.keyframe_trajectory()
         return MapSnapshot(keyframe_indices=np.asarray(kfs.meta["indices"], np.int64), keyframe_stamps=kfs.stamps,
                            keyframe_poses=kfs.poses,
-                           points=np.asarray(self.mapper.map_points(), np.float32).reshape(-1, 3), final=final)
+                           points=np.asarray(self.mapper.map_points(), np.float32).reshape(-1, 3), final=final,
+                           lines=np.asarray(self.mapper.map_lines(), np.float32).reshape(-1, 2, 3))
 
     def teardown(self, ctx: ActorContext) -> None:
         ctx.publish(self._snapshot(final=True))

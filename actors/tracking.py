@@ -15,7 +15,7 @@ import numpy as np
 
 from actors.backlog import FrameBacklog, max_frame_age
 from actors.runtime import Actor, ActorContext
-from canopy.enhance import adaptive_fast_threshold
+from canopy.enhance import adaptive_fast_threshold, fallback_fast_threshold
 from canopy.frontend import Tracker
 from protocol.messages import EndOfStream, FrameDone, FrameHandle, FramePose, KeyframeData, LocalMapUpdate
 from shared.errors import CanopyError
@@ -41,6 +41,7 @@ class TrackingActor(Actor):
         self.adaptive_fast = bool(enh is not None and getattr(enh, "adaptive_fast", False)
                                   and enh.method in ADAPTIVE_FAST_METHODS)
         self.fast_omega = float(getattr(enh, "fast_omega", 128.0)) if enh is not None else 128.0
+        self.fast_min_keypoints = int(getattr(enh, "min_keypoints", 0)) if enh is not None else 0
         self.counts = {"ok": 0, "lost": 0, "init": 0, "keyframes": 0}
 
     def _apply_update(self, update: LocalMapUpdate) -> None:
@@ -74,8 +75,12 @@ class TrackingActor(Actor):
         return handle.sent_at
 
     def _track(self, frame: StereoFrame, handle: FrameHandle, ctx: ActorContext) -> None:
-        fast = adaptive_fast_threshold(frame.left, self.fast_omega) if self.adaptive_fast else None
-        res = self.tracker.track(frame, fast_threshold=fast)
+        if self.adaptive_fast:  # AFE Eq. 18, and Eq. 19 when too few corners result
+            res = self.tracker.track(frame, fast_threshold=adaptive_fast_threshold(frame.left, self.fast_omega),
+                                     fast_fallback=fallback_fast_threshold(frame.left, self.fast_omega),
+                                     fast_min_keypoints=self.fast_min_keypoints)
+        else:
+            res = self.tracker.track(frame)
         self.counts[res.status] = self.counts.get(res.status, 0) + 1
         if res.is_keyframe:
             self.counts["keyframes"] += 1

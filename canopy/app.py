@@ -91,11 +91,11 @@ def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_fra
 def run_slam(dataset: str, path: str | None = None, config: str | None = None, out: str | None = None,
              clock: str | None = None, max_frames: int | None = None, enhance: str | None = None,
              inspect: str | None = None, progress: bool = True, preset: str | None = None,
-             seed: int = 0) -> RunResult:
+             seed: int = 0, lines: bool | None = None) -> RunResult:
     if dataset not in DATASETS:
         from shared.errors import ConfigError
         raise ConfigError("--dataset", f"unknown dataset {dataset!r}; choose one of {DATASETS}")
-    cfg = with_overrides(load_run_config(dataset, config), clock=clock, enhance=enhance)
+    cfg = with_overrides(load_run_config(dataset, config), clock=clock, enhance=enhance, lines=lines)
     if dataset == "synthetic":
         # A generated sequence is written in the EuRoC ASL layout and read as such.
         if path is None:
@@ -123,6 +123,7 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
                 "path": str(source.root) if hasattr(source, "root") else path,
                 "source": source.name, "clock": cfg.runtime.clock,
                 "enhancement": getattr(cfg.enhancement, "method", "none"), "config_file": cfg.source_file,
+                "lines": bool(cfg.tracking.use_lines),
                 "outcome": outcome.reason, "ok": outcome.ok, "wall_s": outcome.wall_s,
                 "frames_per_s": len(collector.poses) / outcome.wall_s if outcome.wall_s else None,
                 "cpu_count": os.cpu_count(), "calibration": calib.to_dict(),

@@ -73,8 +73,12 @@ def load_run_config(dataset: str, config_path: str | Path | None = None) -> RunC
     )
 
 
-def with_overrides(cfg: RunConfig, clock: str | None = None, enhance: str | None = None) -> RunConfig:
+def with_overrides(cfg: RunConfig, clock: str | None = None, enhance: str | None = None,
+                   lines: bool | None = None) -> RunConfig:
     runtime = cfg.runtime if clock is None else replace(cfg.runtime, clock=clock)
+    if lines is not None:  # points + lines needs both tracking and local BA to agree
+        cfg = replace(cfg, tracking=replace(cfg.tracking, use_lines=lines),
+                      mapping=replace(cfg.mapping, use_lines=lines))
     runtime.validate()
     enhancement = cfg.enhancement if enhance is None else replace(cfg.enhancement, method=enhance)
     validate = getattr(enhancement, "validate", None)

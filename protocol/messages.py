@@ -120,6 +120,7 @@ class MapSnapshot:
     points: np.ndarray             # (N, 3) float32
     final: bool = False
     timings_ms: dict = field(default_factory=dict)
+    lines: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3), np.float32))  # (L, 2, 3) endpoints
 
 
 # --- tracking <-> local mapping --------------------------------------------------

@@ -231,3 +231,23 @@ def test_real_kitti_frame_tracked_against_itself_gives_identity():
     assert rotation_angle(again.T_world_cam[:3, :3]) < 1e-7
     for key in ("orb", "stereo", "match_motion", "pnp", "track_local_map", "total"):
         assert key in again.timings
+
+
+def test_adaptive_fast_fallback_recovers_corners_on_a_dark_frame():
+    """AFE Eq. 18 then Eq. 19: a dark, flat frame gets the lower threshold."""
+    import numpy as np
+
+    from canopy.enhance import adaptive_fast_threshold, fallback_fast_threshold
+    from canopy.frontend import OrbExtractor, TrackingParams
+    from canopy.sources import open_source
+
+    dark = (open_source("euroc").frame(0).left * 0.08).astype(np.uint8)
+    hi, lo = adaptive_fast_threshold(dark), fallback_fast_threshold(dark)
+    assert lo < hi
+    ex = OrbExtractor(TrackingParams())
+    only_eq18 = len(ex.extract(dark, hi))
+    with_eq19 = len(ex.extract(dark, hi, lo, min_keypoints=200))
+    assert only_eq18 < 200 <= with_eq19
+    # enough corners: the fallback is not used
+    bright = open_source("euroc").frame(0).left
+    assert len(ex.extract(bright, 20, 1, min_keypoints=10).uv) == len(ex.extract(bright, 20).uv)

@@ -86,10 +86,16 @@ class OrbExtractor:
         )
         self.scale_factors = params.scale_factor ** np.arange(params.n_levels)
 
-    def extract(self, image: np.ndarray, fast_threshold: int | None = None) -> Features:
+    def extract(self, image: np.ndarray, fast_threshold: int | None = None,
+                fallback_threshold: int | None = None, min_keypoints: int = 0) -> Features:
+        """``fallback_threshold``: AFE Eq. 19, retried when ``fast_threshold``
+        (Eq. 18) yields fewer than ``min_keypoints`` corners."""
         thr = self.params.fast_threshold if fast_threshold is None else int(fast_threshold)
         self._orb.setFastThreshold(thr)
         kps, desc = self._orb.detectAndCompute(image, None)
+        if fallback_threshold is not None and len(kps) < min_keypoints and int(fallback_threshold) < thr:
+            self._orb.setFastThreshold(int(fallback_threshold))
+            kps, desc = self._orb.detectAndCompute(image, None)
         if desc is None or len(kps) == 0:
             return Features.empty()
         uv = np.array([k.pt for k in kps], np.float32).reshape(-1, 2)

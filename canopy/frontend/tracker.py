@@ -191,18 +191,22 @@ class Tracker:
         return stereo.valid & (stereo.depth < self._close_depth)
 
     # ------------------------------------------------------------------ main entry
-    def track(self, frame: StereoFrame, fast_threshold: int | None = None) -> TrackingResult:
+    def track(self, frame: StereoFrame, fast_threshold: int | None = None,
+              fast_fallback: int | None = None, fast_min_keypoints: int = 0) -> TrackingResult:
+        """Track one stereo frame. ``fast_threshold`` / ``fast_fallback`` override the
+        FAST threshold (AFE Eq. 18 / Eq. 19 when too few of ``fast_min_keypoints``)."""
         timings: dict[str, float] = {}
         t_all = time.perf_counter()
         line_job = self._line_pool.submit(self._detect_lines, frame.left) if self._lines_on else None
         t0 = time.perf_counter()
         if self._pool is not None:
-            right_job = self._pool.submit(self.extractor_right.extract, frame.right, fast_threshold)
-            left = self.extractor.extract(frame.left, fast_threshold)
+            right_job = self._pool.submit(self.extractor_right.extract, frame.right, fast_threshold,
+                                          fast_fallback, fast_min_keypoints)
+            left = self.extractor.extract(frame.left, fast_threshold, fast_fallback, fast_min_keypoints)
             right = right_job.result()
         else:
-            left = self.extractor.extract(frame.left, fast_threshold)
-            right = self.extractor_right.extract(frame.right, fast_threshold)
+            left = self.extractor.extract(frame.left, fast_threshold, fast_fallback, fast_min_keypoints)
+            right = self.extractor_right.extract(frame.right, fast_threshold, fast_fallback, fast_min_keypoints)
         timings["orb"] = _ms(t0)
         t0 = time.perf_counter()
         stereo = match_stereo(left, right, frame.left, frame.right, self.calib, self.params)
