@@ -179,3 +179,32 @@ def test_lines_flow_through_the_actors(tmp_path):
     assert f"element edge {metrics['map_lines']}" in header
     em = metrics["est_motion"]  # static MAV: lines must not add drift
     assert em["translation_m"] < 0.01 and em["rotation_deg"] < 0.5
+
+
+@pytest.mark.parametrize("how", ["ctrl-c", "sigterm"])
+def test_user_interrupt_stops_cleanly_and_keeps_results(tmp_path, how):
+    """Ctrl-C reaches the whole process group; SIGTERM only the launcher. Both end the run
+    cleanly with what was computed written out and the shared memory removed."""
+    before = _shm_segments()
+    endpoint = f"ipc://{tmp_path}/inspect"
+    out = tmp_path / "run"
+    proc = subprocess.Popen([sys.executable, str(ROOT / "launch.py"), "--dataset", "euroc", "--clock", "realtime",
+                             "--out", str(out), "--inspect", endpoint, "--quiet"],
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        for msg in inspection_client(endpoint, ["pose"], timeout_s=120):
+            if msg.index >= 15:
+                break
+        if how == "ctrl-c":
+            os.killpg(proc.pid, signal.SIGINT)
+        else:
+            proc.send_signal(signal.SIGTERM)
+        stdout, stderr = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 1
+    assert "interrupted by the user" in stderr and "Traceback" not in stderr
+    assert len(np.loadtxt(out / "trajectory.tum")) >= 15
+    assert _shm_segments() <= before
