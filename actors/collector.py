@@ -131,6 +131,25 @@ class RunCollector:
         return Trajectory(stamps, np.array(poses).reshape(-1, 4, 4))
 
     # -- outputs -------------------------------------------------------------------------
+    def write_frames_csv(self, path: Path) -> Path:
+        """One row per frame: tracking outcome, enhancement decision and timings."""
+        cols = ["index", "timestamp", "status", "keyframe", "inliers", "matches", "enhance_method",
+                "mean_in", "mean_out", "enhance_ms", "orb_ms", "stereo_ms", "tracking_ms"]
+        rows = [",".join(cols)]
+        for idx in sorted(self.poses):
+            p = self.poses[idx]
+            e, t = p.enhancement, p.timings_ms
+
+            def num(v):
+                return "" if v is None else f"{float(v):.3f}"
+
+            rows.append(",".join([str(p.index), f"{p.timestamp:.9f}", p.status, str(int(p.is_keyframe)),
+                                  str(p.n_inliers), str(p.n_matches), str(e.get("method", "")),
+                                  num(e.get("mean_in")), num(e.get("mean_out")), num(t.get("enhance")),
+                                  num(t.get("orb")), num(t.get("stereo")), num(t.get("total"))]))
+        path.write_text("\n".join(rows) + "\n")
+        return path
+
     def tracking_summary(self) -> dict:
         statuses = [p.status for p in self.poses.values()]
         n = len(statuses)
@@ -158,6 +177,7 @@ class RunCollector:
         lines = self.snapshot.lines if self.snapshot is not None else np.zeros((0, 2, 3), np.float32)
         if len(lines):
             files["map_lines"] = str(write_ply_lines(out_dir / "map_lines.ply", np.asarray(lines, np.float64)))
+        files["frames"] = str(self.write_frames_csv(out_dir / "frames.csv"))
         metrics = evaluate_trajectory(cam, gt) if len(cam) else {"note": "no frame was tracked"}
         metrics["tracking"] = self.tracking_summary()
         metrics["map_points"] = int(len(points))

@@ -96,7 +96,8 @@ class TrackingActor(Actor):
         ctx.publish(FramePose(index=res.index, timestamp=res.timestamp, T_world_cam=res.T_world_cam,
                               status=res.status, n_inliers=int(res.n_inliers), n_matches=int(res.n_matches),
                               is_keyframe=bool(res.is_keyframe), ref_keyframe=int(ref),
-                              T_ref_cam=T_ref_cam, timings_ms=timings, sent_at=time.time()))
+                              T_ref_cam=T_ref_cam, timings_ms=timings, sent_at=time.time(),
+                              enhancement={k: v for k, v in handle.info.items() if k != "enhance_ms"}))
         ctx.extra.update(self.counts)
         if self.lockstep:
             ctx.send("source", FrameDone(index=res.index, sent_at=time.time()))

@@ -109,6 +109,7 @@ class FramePose:
     T_ref_cam: np.ndarray
     timings_ms: dict = field(default_factory=dict)
     sent_at: float = 0.0
+    enhancement: dict = field(default_factory=dict)  # method used, image statistics before/after
 
 
 @message("map_snapshot")

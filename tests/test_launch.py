@@ -39,7 +39,7 @@ def test_euroc_default_run_writes_every_output(tmp_path):
     res = _launch("--dataset", "euroc", "--out", str(out), "--quiet")
     assert res.returncode == 0, res.stderr[-3000:]
     assert "run summary" in res.stdout and "tracking success" in res.stdout
-    for name in ("trajectory.tum", "keyframes.tum", "map_points.ply", "metrics.json", "stats.json",
+    for name in ("trajectory.tum", "keyframes.tum", "map_points.ply", "metrics.json", "stats.json", "frames.csv",
                  "trajectory.png", "config_used.yaml"):
         assert (out / name).is_file(), name
     metrics = json.loads((out / "metrics.json").read_text())
@@ -50,6 +50,11 @@ def test_euroc_default_run_writes_every_output(tmp_path):
     assert stats["tracking"]["peak_rss_mb"] > 10
     traj = np.loadtxt(out / "trajectory.tum")
     assert traj.shape == (95, 8)
+    em = metrics["est_motion"]  # the MAV sits still: ~zero motion is the drift test
+    assert em["translation_m"] < 0.01 and em["rotation_deg"] < 0.5
+    frames = (out / "frames.csv").read_text().splitlines()
+    assert len(frames) == 96 and frames[0].startswith("index,timestamp,status")
+    assert all(",none," in row for row in frames[1:])  # the enhancement decision of each frame
     assert _shm_segments() <= before
 
 
@@ -208,3 +213,15 @@ def test_user_interrupt_stops_cleanly_and_keeps_results(tmp_path, how):
     assert "interrupted by the user" in stderr and "Traceback" not in stderr
     assert len(np.loadtxt(out / "trajectory.tum")) >= 15
     assert _shm_segments() <= before
+
+
+def test_enhancement_actor_rejects_a_frame_of_the_wrong_size():
+    from actors.enhancement import check_pair
+    from shared.errors import InputError
+
+    ok = np.zeros((480, 752), np.uint8)
+    check_pair(ok, ok, 480, 752, 3)
+    with pytest.raises(InputError, match=r"frame 7 \(right\).*float32"):
+        check_pair(ok, ok.astype(np.float32), 480, 752, 7)
+    with pytest.raises(InputError, match=r"frame 8 \(left\).*\(240, 376\)"):
+        check_pair(ok[::2, ::2], ok, 480, 752, 8)
