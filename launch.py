@@ -44,6 +44,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--inspect", default=None, metavar="ENDPOINT",
                    help="publish every event on this ZeroMQ endpoint for remote clients, "
                         "e.g. tcp://0.0.0.0:5560 (see tools/watch_run.py)")
+    p.add_argument("--record", nargs="?", const="", default=None, metavar="PATH",
+                   help="write an .mcap recording for Foxglove (poses, images, map points and lines); "
+                        "without PATH: <out>/run.mcap")
     p.add_argument("--quiet", action="store_true", help="no progress line")
     return p
 
@@ -60,7 +63,8 @@ def main(argv: list[str] | None = None) -> int:
         from canopy.app import run_slam
         result = run_slam(args.dataset, path=args.path, config=args.config, out=args.out, clock=args.clock,
                           max_frames=args.max_frames, enhance=args.enhance, inspect=args.inspect,
-                          progress=not args.quiet, preset=args.preset, seed=args.seed, lines=args.lines)
+                          progress=not args.quiet, preset=args.preset, seed=args.seed, lines=args.lines,
+                          record=args.record)
     except CanopyError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -35,7 +35,7 @@ class LocalMappingActor(Actor):
             ctx.extra.update({"keyframes": self.n_keyframes, "landmarks": len(self.mapper.landmarks),
                               **{f"{k}_ms": float(v) for k, v in update.timings.items()}})
             if time.monotonic() - self.last_snapshot >= self.snapshot_period:
-                ctx.publish(self._snapshot(final=False))
+                self._publish_snapshot(ctx, final=False)
         elif isinstance(msg, EndOfStream):
             ctx.stop()
 
@@ -47,5 +47,13 @@ class LocalMappingActor(Actor):
                            points=np.asarray(self.mapper.map_points(), np.float32).reshape(-1, 3), final=final,
                            lines=np.asarray(self.mapper.map_lines(), np.float32).reshape(-1, 2, 3))
 
+    def _publish_snapshot(self, ctx: ActorContext, final: bool) -> None:
+        snap = self._snapshot(final=final)
+        ctx.publish(snap)
+        if ctx.has_output("recorder"):
+            ctx.send("recorder", snap, block=False)
+
     def teardown(self, ctx: ActorContext) -> None:
-        ctx.publish(self._snapshot(final=True))
+        self._publish_snapshot(ctx, final=True)
+        if ctx.has_output("recorder"):  # after the final map: the recorder's second end-of-stream
+            ctx.send("recorder", EndOfStream(n_frames=self.n_keyframes, sent_at=time.time()), block=False)

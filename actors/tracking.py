@@ -64,6 +64,8 @@ class TrackingActor(Actor):
         ctx.dropped += dropped
         if handle is None:
             ctx.send("local_mapping", EndOfStream(n_frames=self.backlog.end.n_frames, sent_at=time.time()))
+            if ctx.has_output("recorder"):  # last on this pipe: the recorder has everything before it
+                ctx.send("recorder", EndOfStream(n_frames=self.backlog.end.n_frames, sent_at=time.time()))
             ctx.stop()
             return None
         try:
@@ -93,11 +95,15 @@ class TrackingActor(Actor):
         timings = {k: float(v) for k, v in res.timings.items()}
         if "enhance_ms" in handle.info:
             timings["enhance"] = float(handle.info["enhance_ms"])
-        ctx.publish(FramePose(index=res.index, timestamp=res.timestamp, T_world_cam=res.T_world_cam,
-                              status=res.status, n_inliers=int(res.n_inliers), n_matches=int(res.n_matches),
-                              is_keyframe=bool(res.is_keyframe), ref_keyframe=int(ref),
-                              T_ref_cam=T_ref_cam, timings_ms=timings, sent_at=time.time(),
-                              enhancement={k: v for k, v in handle.info.items() if k != "enhance_ms"}))
+        pose = FramePose(index=res.index, timestamp=res.timestamp, T_world_cam=res.T_world_cam,
+                         status=res.status, n_inliers=int(res.n_inliers), n_matches=int(res.n_matches),
+                         is_keyframe=bool(res.is_keyframe), ref_keyframe=int(ref),
+                         T_ref_cam=T_ref_cam, timings_ms=timings, sent_at=time.time(),
+                         enhancement={k: v for k, v in handle.info.items() if k != "enhance_ms"})
+        ctx.publish(pose)
+        if ctx.has_output("recorder"):  # never block tracking on the recorder
+            ctx.send("recorder", pose, block=False)
+            ctx.send("recorder", handle, block=False)
         ctx.extra.update(self.counts)
         if self.lockstep:
             ctx.send("source", FrameDone(index=res.index, sent_at=time.time()))

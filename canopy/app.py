@@ -61,8 +61,11 @@ def default_out_dir(dataset: str) -> Path:
 
 
 def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_frames: int | None,
-                      rings: dict[str, str], calib, frame_rate_hz: float) -> list[ActorSpec]:
-    ep = {name: Supervisor.endpoints(run_dir, name) for name in ("source", "enhancement", "tracking", "local_mapping")}
+                      rings: dict[str, str], calib, frame_rate_hz: float,
+                      record: str | None = None) -> list[ActorSpec]:
+    ep = {name: Supervisor.endpoints(run_dir, name)
+          for name in ("source", "enhancement", "tracking", "local_mapping", "recorder")}
+    to_recorder = ["recorder"] if record else []
     events = f"ipc://{run_dir}/supervisor.events"
     rt = cfg.runtime
     # In realtime a frame older than one frame period is skipped when a newer one waits.
@@ -81,17 +84,19 @@ def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_fra
         spec("tracking", "actors.tracking:TrackingActor",
              {"ring": rings["enhanced"], "calib": calib, "params": cfg.tracking,
               "enhancement": cfg.enhancement, "lockstep_wait_s": rt.lockstep_wait_s},
-             ["local_mapping", "source"]),
+             ["local_mapping", "source", *to_recorder]),
         spec("local_mapping", "actors.local_mapping:LocalMappingActor",
              {"calib": calib, "params": cfg.mapping, "snapshot_period_s": rt.map_snapshot_period_s},
-             ["tracking"]),
-    ]
+             ["tracking", *to_recorder]),
+    ] + ([spec("recorder", "actors.recorder:RecorderActor",
+               {"path": record, "ring": rings["enhanced"], "image_every": 1, "end_of_streams": 2}, [])]
+         if record else [])
 
 
 def run_slam(dataset: str, path: str | None = None, config: str | None = None, out: str | None = None,
              clock: str | None = None, max_frames: int | None = None, enhance: str | None = None,
              inspect: str | None = None, progress: bool = True, preset: str | None = None,
-             seed: int = 0, lines: bool | None = None) -> RunResult:
+             seed: int = 0, lines: bool | None = None, record: str | None = None) -> RunResult:
     if dataset not in DATASETS:
         from shared.errors import ConfigError
         raise ConfigError("--dataset", f"unknown dataset {dataset!r}; choose one of {DATASETS}")
@@ -106,10 +111,15 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
     source = open_source(dataset_kind, path, max_frames=max_frames)  # validates the dataset before any process starts
     calib = source.calibration
     out_dir = Path(out) if out else default_out_dir(dataset)
+    record_path = None
+    if record is not None:  # "" = the default name in the results folder
+        from canopy.recording import check_output_path
+        record_path = str(check_output_path(Path(record) if record else out_dir / "run.mcap"))
     run_dir = Supervisor.make_run_dir()
     tag = f"canopy_{os.getpid()}_{int(time.time() * 1000) % 100000}"
     rings = {"raw": f"{tag}_raw", "enhanced": f"{tag}_enh"}
-    specs = build_actor_specs(run_dir, cfg, dataset_kind, path, max_frames, rings, calib, source.rate_hz)
+    specs = build_actor_specs(run_dir, cfg, dataset_kind, path, max_frames, rings, calib, source.rate_hz,
+                              record=record_path)
     collector = RunCollector(n_frames=len(source), progress=progress)
     supervisor = Supervisor(
         specs, [RingSpec(rings["raw"], cfg.runtime.ring_slots, calib.height, calib.width),
@@ -123,12 +133,14 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
                 "path": str(source.root) if hasattr(source, "root") else path,
                 "source": source.name, "clock": cfg.runtime.clock,
                 "enhancement": getattr(cfg.enhancement, "method", "none"), "config_file": cfg.source_file,
-                "lines": bool(cfg.tracking.use_lines),
+                "lines": bool(cfg.tracking.use_lines), "recording": record_path,
                 "outcome": outcome.reason, "ok": outcome.ok, "wall_s": outcome.wall_s,
                 "frames_per_s": len(collector.poses) / outcome.wall_s if outcome.wall_s else None,
                 "cpu_count": os.cpu_count(), "calibration": calib.to_dict(),
                 "errors": [{"actor": e.actor, "error": e.error, "frame": e.frame_index} for e in collector.errors]}
     summary = collector.write_outputs(out_dir, source.ground_truth, run_info)
+    if record_path and Path(record_path).is_file():
+        summary["files"]["recording"] = record_path
     _write_config(out_dir, cfg)
     text = format_summary(summary, outcome.reason, os.cpu_count() or 1)
     return RunResult(outcome=outcome, summary=summary, out_dir=out_dir, text=text)
