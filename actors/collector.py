@@ -223,6 +223,10 @@ def format_summary(summary: dict, outcome_reason: str, n_cores: int) -> str:
                      f"(path {em['path_length_m']:.3f} m)")
     if m.get("note"):
         lines.append(f"  note                 {m['note']}")
+    errors = (m.get("run") or {}).get("errors") or []
+    if errors:
+        first = errors[0]
+        lines.append(f"  problems             {len(errors)} reported; first: {first['actor']}: {first['error']}")
     lines += ["", f"  per actor ({n_cores} cores)     msgs  drop  svc p50   p95     max  | queue p50  | CPU %  | peak RSS",
               "  " + "-" * 98]
     for name, s in summary["stats"].items():
