@@ -12,7 +12,8 @@ import pytest
 
 from canopy.frontend.geometry import se3_exp, transform
 from canopy.lines import (LineDescriber, LineParams, detect_segments, line_coefficients, line_reprojection_error,
-                          line_reprojection_jacobians, line_residuals, match_stereo_lines, sanitize_segments)
+                          line_reprojection_jacobians, line_residuals, match_stereo_lines, right_segments_in_reach,
+                          sanitize_segments)
 from shared.errors import ConfigError, InputError
 from shared.params import params_from_mapping
 from shared.types import StereoCalibration
@@ -218,6 +219,27 @@ def test_real_euroc_frame_stereo_lines():
     u = src.calibration.fx * P[..., 0] / P[..., 2] + src.calibration.cx
     v = src.calibration.fy * P[..., 1] / P[..., 2] + src.calibration.cy
     assert np.allclose(np.stack([u, v], -1).reshape(-1, 4), seg, atol=1e-3)
+
+
+def test_right_segments_out_of_reach_never_match():
+    """Describing only the right segments within stereo reach of a left one (what tracking does
+    for the right image) gives exactly the matches of describing them all."""
+    from canopy.sources import open_source
+
+    src = open_source("euroc")
+    frame = src.frame(0)
+    params = LineParams()
+    describe = LineDescriber(params)
+    sl, _ = detect_segments(frame.left, params)
+    sr, _ = detect_segments(frame.right, params)
+    dl = describe(frame.left, sl)
+    full = match_stereo_lines(sl, dl, sr, describe(frame.right, sr), src.calibration, params)
+    keep = right_segments_in_reach(sl, sr, src.calibration, params)
+    assert 0 < keep.sum() < len(sr)
+    sub = match_stereo_lines(sl, dl, sr[keep], describe(frame.right, sr[keep]), src.calibration, params)
+    np.testing.assert_array_equal(sub.left_idx, full.left_idx)
+    np.testing.assert_array_equal(np.flatnonzero(keep)[sub.right_idx], full.right_idx)
+    np.testing.assert_array_equal(sub.points_cam, full.points_cam)
 
 
 # ------------------------------------------------------------------ Eq. 10 and Jacobians

@@ -9,12 +9,12 @@ import pytest
 
 from canopy.backend import LocalMapper, MappingParams
 from canopy.backend.line_factors import line_custom_factor, line_error_and_jacobians
-from canopy.frontend import TrackingParams
+from canopy.frontend import Tracker, TrackingParams
 from canopy.frontend.geometry import project_stereo, rotation_angle, se3_exp, se3_inv, transform
-from canopy.frontend.line_tracking import (LineFrame, LineMapView, match_map_lines, project_segments,
+from canopy.frontend.line_tracking import (LineFrame, LineMapView, _line_terms, match_map_lines, project_segments,
                                            refine_pose_points_lines)
 from canopy.frontend.pose import refine_pose
-from canopy.lines import line_coefficients
+from canopy.lines import line_coefficients, line_residuals
 from canopy.metrics import ape
 from canopy.pipeline import run_sequential
 from canopy.sources import open_source
@@ -72,6 +72,23 @@ def test_lines_only_refinement_recovers_exact_pose():
     assert dt < 1e-3 and da < 0.05, (dt, da)
     assert est.line_inliers.all()
     assert np.linalg.matrix_rank(est.information) == 6
+
+
+def test_line_terms_match_line_residuals():
+    """The one-transform residuals and pose Jacobians used by the refinement equal Eq. 10's
+    (``canopy.lines.line_residuals``, itself checked against central differences)."""
+    rng = np.random.default_rng(11)
+    L = _scene_lines(rng, 30)
+    T = se3_exp(np.array([0.03, -0.02, 0.01, 0.1, 0.05, -0.2]))
+    coeffs = line_coefficients(_observe(T, L)[0] + rng.normal(0, 2.0, (len(L), 4)))
+    e, J, front = _line_terms(T, L[:, 0], L[:, 1], coeffs, CALIB)
+    e_ref, J_ref, _, _ = line_residuals(T, L[:, 0], L[:, 1], coeffs, CALIB, jacobians=True)
+    assert front.all()
+    np.testing.assert_allclose(e, e_ref, atol=1e-9)
+    np.testing.assert_allclose(J, J_ref, rtol=1e-9, atol=1e-9)
+    behind = L.copy()
+    behind[0, 1, 2] = -1.0  # one endpoint behind the camera
+    assert not _line_terms(np.eye(4), behind[:, 0], behind[:, 1], coeffs, CALIB)[2][0]
 
 
 def test_points_and_lines_beat_scarce_points():
@@ -215,6 +232,22 @@ def test_local_ba_with_lines_recovers_poses_and_lines(factor):
     assert np.median(after) < 0.005 and after.max() < 0.02, (np.median(after), after.max())
 
 
+def test_lines_without_a_right_view_stay_out_of_ba():
+    """A line seen by two keyframes in left images only (its right half dropped) has a free
+    depth for a still camera: it stays out of BA, endpoints untouched, observations kept."""
+    rng = np.random.default_rng(5)
+    kfs, _, _ = _synthetic_keyframes(rng)
+    mapper = LocalMapper(CALIB, MappingParams(use_lines=True, covisibility_min_shared=5))
+    mapper.insert_keyframe(kfs[0])
+    mapper.keyframes[kfs[0].index].line_coeffs_right[0] = np.nan  # line 0: left views only
+    ends0 = mapper.lines[0].endpoints.copy()
+    mapper.insert_keyframe(kfs[1])
+    edges = mapper._line_edges(list(mapper.keyframes), set(mapper.keyframes))
+    assert 0 not in edges[1] and 1 in edges[1]
+    np.testing.assert_array_equal(mapper.lines[0].endpoints, ends0)
+    assert len(mapper.lines[0].obs) == 2 and not np.array_equal(mapper.lines[1].endpoints, ends0)
+
+
 def test_mapper_without_lines_ignores_line_fields():
     rng = np.random.default_rng(6)
     kfs, _, _ = _synthetic_keyframes(rng)
@@ -255,6 +288,27 @@ def test_kitti06_with_lines_tracks_all_frames_no_worse_than_points(kitti_runs):
     assert on.map_lines.ndim == 3 and on.map_lines.shape[1:] == (2, 3) and len(on.map_lines) > 50
     assert off.map_lines.shape == (0, 2, 3)
     assert on.timing_summary()["tracking.line_match"]["n"] >= 50
+
+
+def test_right_lines_ahead_or_on_demand_give_the_same_result(monkeypatch):
+    """The right image's lines are queued ahead when a keyframe is likely, else computed when
+    the keyframe is made: a pure function of the image, so never a different result."""
+    src = open_source("kitti", max_frames=12)
+
+    def run(likely: bool):
+        monkeypatch.setattr(Tracker, "_keyframe_likely", lambda self: likely)
+        res = run_sequential(src, TrackingParams(use_lines=True), MappingParams(use_lines=True))
+        ahead = sum("lines_right_wait" in t for t in res.tracking_timings)
+        on_demand = sum("lines_right_on_demand" in t for t in res.tracking_timings)
+        return res, ahead, on_demand
+
+    a, a_ahead, a_demand = run(True)
+    b, b_ahead, b_demand = run(False)
+    assert a_ahead == len(a.keyframe_indices) and a_demand == 0
+    assert b_demand == len(b.keyframe_indices) and b_ahead == 0
+    assert a.keyframe_indices == b.keyframe_indices and a.statuses == b.statuses
+    np.testing.assert_array_equal(a.trajectory.poses, b.trajectory.poses)
+    np.testing.assert_array_equal(a.map_lines, b.map_lines)
 
 
 def test_euroc_static_with_lines_stays_within_drift_bound():

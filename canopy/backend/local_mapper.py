@@ -299,10 +299,14 @@ class LocalMapper:
             values.insert(L(lid), self.landmarks[lid].position)
         if lines is not None:
             l_kf, l_id, l_coef, l_right = lines
-            l_active = np.ones(len(l_kf), bool)
             for lid in np.unique(l_id).tolist():
                 values.insert(EA(lid), self.lines[lid].endpoints[0])
                 values.insert(EB(lid), self.lines[lid].endpoints[1])
+            # edges far off at the initial estimate stay out of the graph (their residual would
+            # dominate the first LM steps) and are judged again after BA; l_out: outliers found
+            # by a pass; l_active: usable edges of lines they still constrain
+            l_gated = self._line_edge_chi2(values, l_kf, l_id, l_coef, l_right) > p.line_chi2_gate
+            l_out = np.zeros(len(l_kf), bool)
         fixed_noise = gtsam.noiseModel.Isotropic.Sigma(6, p.fixed_pose_sigma)
         for _ in range(p.ba_passes):
             graph = gtsam.NonlinearFactorGraph()
@@ -318,18 +322,21 @@ class LocalMapper:
                         gtsam.Point2(uv[j, 0], uv[j, 1]), self._noise(False, int(octv[j]), scale),
                         X(int(e_kf[j])), L(int(e_lm[j])), self._Kmono))
             if lines is not None:
+                l_active = self._line_edges_constrained(l_kf, l_id, l_right, ~(l_out | l_gated))
                 self._add_line_factors(graph, values, l_kf[l_active], l_id[l_active], l_coef[l_active],
                                        l_right[l_active])
             lm_params = gtsam.LevenbergMarquardtParams()
             lm_params.setMaxIterations(p.ba_iterations)
+            if lines is not None:
+                lm_params.setRelativeErrorTol(p.line_ba_relative_error_tol)
             values = gtsam.LevenbergMarquardtOptimizer(graph, values, lm_params).optimize()
             chi2 = self._edge_chi2(values, e_kf, e_lm, uv, ur, stereo, octv, scale)
             bad = chi2 > np.where(stereo, p.chi2_stereo, p.chi2_mono)
             l_bad_new = False
             if lines is not None:
-                l_bad = self._line_edge_chi2(values, l_kf, l_id, l_coef, l_right) > p.chi2_line
-                l_bad_new = bool((l_active & l_bad).any())
-                l_active &= ~l_bad
+                l_bad = l_active & (self._line_edge_chi2(values, l_kf, l_id, l_coef, l_right) > p.chi2_line)
+                l_bad_new = p.line_outliers_repeat_pass and bool(l_bad.any())
+                l_out |= l_bad
             if not (active & bad).any() and not l_bad_new:
                 break
             active &= ~bad
@@ -347,34 +354,52 @@ class LocalMapper:
             for lid in np.unique(l_id).tolist():
                 self.lines[lid].endpoints = np.stack([np.asarray(values.atPoint3(EA(lid)), float),
                                                       np.asarray(values.atPoint3(EB(lid)), float)])
-            l_bad = ~l_active | (self._line_edge_chi2(values, l_kf, l_id, l_coef, l_right) > p.chi2_line)
+            judged = l_active | l_gated
+            l_bad = l_out | (judged & (self._line_edge_chi2(values, l_kf, l_id, l_coef, l_right) > p.chi2_line))
             for j in np.flatnonzero(l_bad).tolist():
                 self._remove_line_observation(int(l_id[j]), int(l_kf[j]), bool(l_right[j]))
 
     # ----------------------------------------------------------------- line terms (Eq. 10)
     def _line_edges(self, local: list[int], kf_set: set[int]):
         """Line edges of the lines seen by the local keyframes: (keyframe, line id, line
-        coefficients, right image?) for every observation in ``kf_set``. Lines with fewer than
-        two edges (one view of an infinite line does not fix it) stay out of BA."""
+        coefficients, right image?) for every observation in ``kf_set``. A line enters BA when
+        ``line_ba_min_keyframes`` keyframes of the window observe it (a line seen by one keyframe
+        only constrains no pose, it only adds two free endpoints) and one of them in the right
+        image too: left views alone leave the endpoints' depth free when the camera stands still
+        or moves in the line's plane, an indeterminate system that LM only damps, slowly."""
         ids = sorted({lid for k in local for lid in self.keyframes[k].line_landmark.tolist() if lid >= 0})
         e_kf, e_id, e_coef, e_right = [], [], [], []
         for lid in ids:
-            rows = []
             for k, j in self.lines[lid].obs.items():
                 if k not in kf_set:
                     continue
                 kf = self.keyframes[k]
-                rows.append((k, kf.line_coeffs[j], False))
+                e_kf.append(k)
+                e_id.append(lid)
+                e_coef.append(kf.line_coeffs[j])
+                e_right.append(False)
                 if np.isfinite(kf.line_coeffs_right[j]).all():
-                    rows.append((k, kf.line_coeffs_right[j], True))
-            if len(rows) >= 2:
-                for k, c, r in rows:
                     e_kf.append(k)
                     e_id.append(lid)
-                    e_coef.append(c)
-                    e_right.append(r)
-        return (np.asarray(e_kf, np.int64), np.asarray(e_id, np.int64), np.asarray(e_coef, float).reshape(-1, 3),
-                np.asarray(e_right, bool))
+                    e_coef.append(kf.line_coeffs_right[j])
+                    e_right.append(True)
+        edges = (np.asarray(e_kf, np.int64), np.asarray(e_id, np.int64), np.asarray(e_coef, float).reshape(-1, 3),
+                 np.asarray(e_right, bool))
+        keep = self._line_edges_constrained(edges[0], edges[1], edges[3], np.ones(len(edges[0]), bool))
+        return tuple(a[keep] for a in edges)
+
+    def _line_edges_constrained(self, l_kf, l_id, l_right, usable) -> np.ndarray:
+        """Mask of the ``usable`` edges whose line is constrained by its usable edges: seen by
+        ``line_ba_min_keyframes`` keyframes, once in a right image (see ``_line_edges``)."""
+        if len(l_kf) == 0:
+            return np.zeros(0, bool)
+        uniq, inv = np.unique(l_id, return_inverse=True)
+        n_right = np.bincount(inv, weights=(usable & l_right), minlength=len(uniq))
+        # distinct keyframes per line among the usable edges
+        pairs = np.unique(np.column_stack([inv, l_kf])[usable], axis=0)
+        n_kf = np.bincount(pairs[:, 0], minlength=len(uniq)) if len(pairs) else np.zeros(len(uniq), np.int64)
+        ok = (n_kf >= self.params.line_ba_min_keyframes) & (n_right >= 1)
+        return usable & ok[inv]
 
     def _add_line_factors(self, graph, values, l_kf, l_id, l_coef, l_right) -> None:
         p = self.params

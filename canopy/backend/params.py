@@ -43,6 +43,20 @@ class MappingParams:
     huber_line: float = math.sqrt(CHI2_95_2DOF)
     chi2_line: float = CHI2_95_2DOF      # line observation outlier threshold after BA
     line_min_observations: int = 2       # keyframes that must see a line once it is old enough
+    # lines enter local BA once this many keyframes of the window observe them, one of them in
+    # the right image too (1: also lines seen by one stereo keyframe only, which constrain no
+    # pose and only add variables; left views alone leave the depth free for a still camera)
+    line_ba_min_keyframes: int = 2
+    # line observations farther than this (chi2, line_sigma units, both endpoints) from the
+    # initial estimate are outliers before BA starts (400: ~14 px at each endpoint)
+    line_chi2_gate: float = 400.0
+    # True: line outliers found after a pass trigger another pass, as point outliers do.
+    # False: they are dropped after BA (the Huber kernel bounded their pull on the poses)
+    line_outliers_repeat_pass: bool = False
+    # LM stops when an iteration lowers the cost by less than this fraction (GTSAM's default
+    # 1e-5 stays for points only): Huber-weighted line outliers make the cost creep down by
+    # ~1e-4 per iteration for many iterations without moving the estimate measurably
+    line_ba_relative_error_tol: float = 1e-3
 
     def validate(self) -> "MappingParams":
         def need(ok: bool, name: str, what: str) -> None:
@@ -67,6 +81,9 @@ class MappingParams:
         need(self.line_sigma > 0 and self.line_sigma_along > 0, "line_sigma", "and line_sigma_along must be > 0")
         need(self.huber_line > 0 and self.chi2_line > 0, "huber_line", "and chi2_line must be > 0")
         need(self.line_min_observations >= 1, "line_min_observations", "must be >= 1")
+        need(self.line_ba_min_keyframes >= 1, "line_ba_min_keyframes", "must be >= 1")
+        need(self.line_chi2_gate >= self.chi2_line, "line_chi2_gate", "must be >= chi2_line")
+        need(0 < self.line_ba_relative_error_tol < 1, "line_ba_relative_error_tol", "must be in (0, 1)")
         return self
 
     def __post_init__(self):

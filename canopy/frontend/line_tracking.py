@@ -24,7 +24,7 @@ import numpy as np
 from canopy.frontend.geometry import pose_information, se3_exp, stereo_pose_jacobian, transform
 from canopy.frontend.matching import as_words, best_two, hamming_pairs, unique_by_reference
 from canopy.frontend.pose import PoseEstimate, measurement_chi2
-from canopy.lines import line_coefficients, line_residuals
+from canopy.lines import line_coefficients
 from shared.types import StereoCalibration
 
 _MIN_DEPTH = 1e-3          # m; endpoints closer to (or behind) the camera are not projected
@@ -133,12 +133,37 @@ def match_map_lines(T_cw: np.ndarray, view: LineMapView, frame: LineFrame, calib
     return qsel[keep], rsel[keep], dsel[keep]
 
 
+def _line_terms(T_cw, A_w, B_w, coeffs, calib: StereoCalibration):
+    """Eq. 10 residuals (N,2), their pose Jacobians (N,2,6) and a mask of lines with both
+    endpoints in front, from one transform of the endpoints.
+
+    Per endpoint with camera point P and distance gradient g = d e / d P: perturbing T_cw on
+    the left by xi = (omega, v) moves P by omega x P + v, so d e / d xi = (P x g, g).
+    """
+    R, t = T_cw[:3, :3], T_cw[:3, 3]
+    n = len(A_w)
+    P = np.concatenate([A_w, B_w]) @ R.T + t                      # (2N,3): A rows, then B rows
+    x, y, z = P[:, 0], P[:, 1], P[:, 2]
+    ok = z > _MIN_DEPTH
+    front = ok[:n] & ok[n:]
+    iz = 1.0 / np.where(ok, z, 1.0)
+    l = np.concatenate([coeffs, coeffs])
+    a = l[:, 0] * calib.fx * iz
+    b = l[:, 1] * calib.fy * iz
+    ab = a * x + b * y
+    e = ab + l[:, 0] * calib.cx + l[:, 1] * calib.cy + l[:, 2]
+    c = -ab * iz                                                   # g = (a, b, c)
+    J = np.empty((2 * n, 6))
+    J[:, 0] = y * c - z * b                                        # P x g
+    J[:, 1] = z * a - x * c
+    J[:, 2] = x * b - y * a
+    J[:, 3], J[:, 4], J[:, 5] = a, b, c
+    return e.reshape(2, n).T, J.reshape(2, n, 6).transpose(1, 0, 2), front
+
+
 def line_chi2(T_cw, A_w, B_w, coeffs, sigma: float, calib: StereoCalibration) -> np.ndarray:
     """Eq. 11 line term per line: (d_a^2 + d_b^2) / sigma^2 (inf when an endpoint is behind)."""
-    PA, PB = transform(T_cw, A_w), transform(T_cw, B_w)
-    front = (PA[:, 2] > _MIN_DEPTH) & (PB[:, 2] > _MIN_DEPTH)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        e = line_residuals(T_cw, A_w, B_w, coeffs, calib)
+    e, _, front = _line_terms(T_cw, A_w, B_w, coeffs, calib)
     chi2 = (e**2).sum(axis=1) / sigma**2
     chi2[~front | ~np.isfinite(chi2)] = np.inf
     return chi2
@@ -148,8 +173,8 @@ def line_information(T_cw, A_w, B_w, coeffs, sigma: float, calib: StereoCalibrat
     """(6,6) pose information J^T Sigma^-1 J of Eq. 10 residuals (Sigma = sigma^2 I)."""
     if len(A_w) == 0:
         return np.zeros((6, 6))
-    _, J, _, _ = line_residuals(T_cw, A_w, B_w, coeffs, calib, jacobians=True)
-    return np.einsum("nki,nkj->ij", J, J) / sigma**2
+    J = _line_terms(T_cw, A_w, B_w, coeffs, calib)[1].reshape(-1, 6)
+    return J.T @ J / sigma**2
 
 
 @dataclass
@@ -178,38 +203,40 @@ def refine_pose_points_lines(T_cw: np.ndarray, X_w: np.ndarray, meas: np.ndarray
     T = T_cw.copy()
     for rnd in range(rounds):
         robust = rnd < rounds - 1
-        for _ in range(iterations):
-            idx, lidx = np.flatnonzero(inl), np.flatnonzero(linl)
-            if 3 * len(idx) + 2 * len(lidx) < 6:
-                break
+        # the inlier sets change between rounds only
+        idx, lidx = np.flatnonzero(inl), np.flatnonzero(linl)
+        Xr, mr, hrr, sr, kr = X_w[idx], meas[idx], hr[idx], sigma[idx], np.sqrt(thr[idx])
+        Ar, Br, cr = A_w[lidx], B_w[lidx], coeffs[lidx]
+        for _ in range(iterations if 3 * len(idx) + 2 * len(lidx) >= 6 else 0):
             H, g = np.zeros((6, 6)), np.zeros(6)
             if len(idx):
-                chi2, r, Pc = measurement_chi2(T, X_w[idx], meas[idx], hr[idx], sigma[idx], calib)
+                chi2, r, Pc = measurement_chi2(T, Xr, mr, hrr, sr, calib)
                 front = np.isfinite(chi2)
-                idx, r, Pc, chi2 = idx[front], r[front], Pc[front], chi2[front]
-                w = 1.0 / sigma[idx] ** 2
+                w = np.where(front, 1.0 / sr**2, 0.0)
                 if robust:
-                    e = np.sqrt(chi2)
-                    k = np.sqrt(thr[idx])
-                    w = w * np.where(e <= k, 1.0, k / np.maximum(e, 1e-12))
-                J = stereo_pose_jacobian(Pc, calib)
+                    e = np.sqrt(np.where(front, chi2, 0.0))
+                    w = w * np.where(e <= kr, 1.0, kr / np.maximum(e, 1e-12))
+                Pc = np.where(front[:, None], Pc, 1.0)  # rows behind the camera carry zero weight
+                r = np.where(front[:, None], r, 0.0)
+                J = stereo_pose_jacobian(Pc, calib).reshape(-1, 6)
                 W = np.repeat(w[:, None], 3, axis=1)
-                W[:, 2] *= hr[idx]
-                H += np.einsum("nki,nk,nkj->ij", J, W, J)
-                g += np.einsum("nki,nk,nk->i", J, W, r)
+                W[:, 2] *= hrr
+                JW = J * W.reshape(-1, 1)
+                H += JW.T @ J
+                g += JW.T @ r.reshape(-1)
             if len(lidx):
-                lchi2 = line_chi2(T, A_w[lidx], B_w[lidx], coeffs[lidx], line_sigma, calib)
-                fin = np.isfinite(lchi2)
-                lidx, lchi2 = lidx[fin], lchi2[fin]
-                if len(lidx):
-                    # Eq. 10: e = (l . pi~(T A), l . pi~(T B)); residual to drive to zero is -e
-                    e, Jl, _, _ = line_residuals(T, A_w[lidx], B_w[lidx], coeffs[lidx], calib, jacobians=True)
-                    wl = np.full(len(lidx), 1.0 / line_sigma**2)
-                    if robust:
-                        el = np.sqrt(lchi2)
-                        wl = wl * np.where(el <= k_line, 1.0, k_line / np.maximum(el, 1e-12))
-                    H += np.einsum("nki,n,nkj->ij", Jl, wl, Jl)
-                    g -= np.einsum("nki,n,nk->i", Jl, wl, e)
+                # Eq. 10: e = (l . pi~(T A), l . pi~(T B)); residual to drive to zero is -e
+                e, Jl, fin = _line_terms(T, Ar, Br, cr, calib)
+                lchi2 = (e**2).sum(axis=1) / line_sigma**2
+                fin &= np.isfinite(lchi2)
+                wl = np.where(fin, 1.0 / line_sigma**2, 0.0)
+                if robust:
+                    el = np.sqrt(np.where(fin, lchi2, 0.0))
+                    wl = wl * np.where(el <= k_line, 1.0, k_line / np.maximum(el, 1e-12))
+                Jf = np.where(fin[:, None, None], Jl, 0.0).reshape(-1, 6)
+                Jw = Jf * np.repeat(wl, 2)[:, None]
+                H += Jw.T @ Jf
+                g -= Jw.T @ np.where(fin[:, None], e, 0.0).reshape(-1)
             try:
                 dx = np.linalg.solve(H, g)
             except np.linalg.LinAlgError:

@@ -84,8 +84,9 @@ class TrackingParams:
 
     # --- line features in tracking (AGRI §3.2.1-3.2.3, Eq. 10-11; issue 4) -----------
     # Off: the points-only pipeline runs unchanged. On: FLD/LSD segments of the left image
-    # are detected and LBD-described in a worker thread while ORB and stereo run; the right
-    # image's lines are detected only at keyframes (stereo lines create map lines there).
+    # are detected and LBD-described in a worker thread (queued behind the right image's ORB);
+    # the right image's lines are needed only at keyframes (stereo lines create map lines
+    # there): queued in the same worker when a keyframe is likely, else computed on demand.
     use_lines: bool = False
     line_detector: str = "fld"
     line_max_lines: int = 100           # longest segments kept per image (LBD cost ~ count)

@@ -94,16 +94,23 @@ class Tracker:
             # imported here: canopy.lines builds on canopy.frontend.geometry, so a module-level
             # import would make the two packages import each other
             from canopy.frontend import line_tracking
-            from canopy.lines import LineDescriber, LineParams, detect_segments, match_stereo_lines
+            from canopy.lines import (LineDescriber, LineParams, detect_segments, match_stereo_lines,
+                                      right_segments_in_reach)
             self._lt = line_tracking
             self._detect_segments, self._match_stereo_lines = detect_segments, match_stereo_lines
+            self._right_in_reach = right_segments_in_reach
             p = self.params
             self.line_params = LineParams(detector=p.line_detector, max_lines=p.line_max_lines,
                                           min_length_fraction=p.line_min_length_fraction)
             # one describer per thread: the left image is described in the worker
             self._line_describer = LineDescriber(self.line_params)
             self._line_describer_right = LineDescriber(self.line_params)
-            self._line_pool = ThreadPoolExecutor(max_workers=1)
+            # line jobs queue behind the right image's ORB in its worker (one FIFO thread: with
+            # two cores, ORB left | ORB right, then lines while the main thread matches stereo)
+            self._line_pool = self._pool if self._pool is not None else ThreadPoolExecutor(max_workers=1)
+            self._right_lines_job = None      # (frame index, future) of the right image's lines
+            self._line_timings: dict[str, float] = {}
+            self._last_was_keyframe = False
             self._line_update_view = line_tracking.LineMapView()
             self._line_provisional: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
             self._line_view = line_tracking.LineMapView()
@@ -159,20 +166,69 @@ class Tracker:
             self._line_view_dirty = False
         return self._line_view
 
-    def _detect_lines(self, image: np.ndarray, right: bool = False) -> LineFrame:
-        """Segments + LBD of one image (AGRI §3.2.1); runs in the line worker for the left image."""
+    def _detect_lines(self, image: np.ndarray, left=None) -> LineFrame:
+        """Segments + LBD of one image (AGRI §3.2.1), in the line worker.
+
+        ``left`` (the left image's LineFrame, or the future of it queued before this job in the
+        same worker) marks a right image: only its segments within stereo reach of a left
+        segment (``right_segments_in_reach``) are kept and described; the others could never
+        be matched.
+        """
         t0 = time.perf_counter()
         scale = self.params.line_image_scale
         if scale != 1.0:  # detect and describe on a reduced image, endpoints back in full-size pixels
             image = cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
         segs, stats = self._detect_segments(image, self.line_params)
+        # full-size pixels: pixel centres of the INTER_AREA grid above
+        full = (segs.astype(np.float64) + 0.5) / scale - 0.5 if scale != 1.0 else segs.astype(np.float64)
+        if left is not None:
+            left = left.result() if hasattr(left, "result") else left
+            keep = self._right_in_reach(left.segs, full, self.calib, self.line_params)
+            segs, full = segs[keep], full[keep]
+            stats["out_of_reach"] = int((~keep).sum())
         t1 = time.perf_counter()
-        desc = (self._line_describer_right if right else self._line_describer)(image, segs)
-        if scale != 1.0:
-            segs = (segs.astype(np.float64) + 0.5) / scale - 0.5  # pixel centres of the INTER_AREA grid
+        desc = (self._line_describer if left is None else self._line_describer_right)(image, segs)
         stats["detect_ms"] = (t1 - t0) * 1e3
         stats["describe_ms"] = _ms(t1)
-        return self._lt.LineFrame.build(segs, desc, stats)
+        return self._lt.LineFrame.build(full, desc, stats)
+
+    def _keyframe_likely(self) -> bool:
+        """Whether this frame may well become a keyframe: (re)initialisation, right after a
+        keyframe (keyframes come in runs when the view changes fast, as on KITTI), or the
+        frame where ``max_frames_between_keyframes`` forces one."""
+        return (not self._initialised or self._need_restart or self._last_was_keyframe
+                or self._frames_since_kf + 1 >= self.params.max_frames_between_keyframes)
+
+    def _submit_line_jobs(self, frame: StereoFrame):
+        """Queue the left image's lines and, when a keyframe is likely, the right image's (needed
+        only by keyframes) in the line worker; returns the left job. The right lines are a pure
+        function of the right image, so whether they were computed ahead or on demand never
+        changes a result."""
+        job = self._line_pool.submit(self._detect_lines, frame.left)
+        if self._keyframe_likely():
+            self._right_lines_job = (frame.index, self._line_pool.submit(self._detect_lines, frame.right, job))
+        return job
+
+    def _right_lines(self, frame: StereoFrame, lines: LineFrame) -> LineFrame:
+        """The right image's lines: the job queued ahead, or one queued now (in the same worker,
+        so the right describer is never used by two threads)."""
+        t0 = time.perf_counter()
+        ahead = self._right_lines_job
+        self._right_lines_job = None
+        if ahead is not None and ahead[0] == frame.index:
+            right = ahead[1].result()
+            self._line_timings["lines_right_wait"] = _ms(t0)
+        else:
+            right = self._line_pool.submit(self._detect_lines, frame.right, lines).result()
+            self._line_timings["lines_right_on_demand"] = _ms(t0)
+        return right
+
+    def _finish_line_jobs(self, is_keyframe: bool) -> None:
+        """Drop a right-image job queued for a frame that did not become a keyframe."""
+        self._last_was_keyframe = bool(is_keyframe)
+        if self._right_lines_job is not None:
+            self._right_lines_job[1].cancel()  # no-op if already running: it finishes on its own
+            self._right_lines_job = None
 
     # ------------------------------------------------------------------ helpers
     def _sigma(self, octave: np.ndarray) -> np.ndarray:
@@ -197,11 +253,12 @@ class Tracker:
         FAST threshold (AFE Eq. 18 / Eq. 19 when too few of ``fast_min_keypoints``)."""
         timings: dict[str, float] = {}
         t_all = time.perf_counter()
-        line_job = self._line_pool.submit(self._detect_lines, frame.left) if self._lines_on else None
         t0 = time.perf_counter()
         if self._pool is not None:
             right_job = self._pool.submit(self.extractor_right.extract, frame.right, fast_threshold,
                                           fast_fallback, fast_min_keypoints)
+        line_job = self._submit_line_jobs(frame) if self._lines_on else None
+        if self._pool is not None:
             left = self.extractor.extract(frame.left, fast_threshold, fast_fallback, fast_min_keypoints)
             right = right_job.result()
         else:
@@ -225,6 +282,10 @@ class Tracker:
         else:
             res = self._track_frame(frame, left, stereo, timings, lines)
         res.n_stereo = n_stereo
+        if self._lines_on:
+            self._finish_line_jobs(res.is_keyframe)
+            timings.update(self._line_timings)
+            self._line_timings.clear()
         timings["total"] = _ms(t_all)
         res.timings = timings
         return res
@@ -263,12 +324,13 @@ class Tracker:
     def _keyframe_lines(self, frame: StereoFrame, lines: LineFrame, line_matched: np.ndarray, T_wc: np.ndarray) -> dict:
         """Line fields of the keyframe: matched map lines plus new stereo lines (AGRI §3.2.2).
 
-        The right image is detected and described only here (stereo is needed only at
-        keyframes); new lines are stereo matches not matched to a map line, with both
-        endpoints in front and closer than ``line_max_depth_baselines`` baselines.
+        The right image's lines are needed only here (stereo lines only at keyframes): queued
+        ahead in the line worker when a keyframe was likely, else now. New lines are stereo
+        matches not matched to a map line, with both endpoints in front and closer than
+        ``line_max_depth_baselines`` baselines.
         """
         n = len(lines)
-        right = self._detect_lines(frame.right, right=True)
+        right = self._right_lines(frame, lines)
         st = self._match_stereo_lines(lines.segs, lines.desc, right.segs, right.desc, self.calib, self.line_params)
         seg_r = np.full((n, 4), np.nan)
         P_cam = np.full((n, 2, 3), np.nan)

@@ -53,14 +53,16 @@ def backproject(u: np.ndarray, v: np.ndarray, disparity: np.ndarray, calib: Ster
     return np.stack([(u - calib.cx) * z / calib.fx, (v - calib.cy) * z / calib.fy, z], axis=-1)
 
 
-def match_stereo_lines(segs_l: np.ndarray, desc_l: np.ndarray, segs_r: np.ndarray, desc_r: np.ndarray,
-                       calib: StereoCalibration, params: LineParams) -> StereoLines:
+def stereo_candidates(segs_l: np.ndarray, segs_r: np.ndarray, calib: StereoCalibration, params: LineParams):
+    """Geometric stereo candidates (no descriptors): left indices, right indices, vertical
+    overlap and endpoint disparities (K,2) of every pair passing the gates of the module doc."""
     sl = np.asarray(segs_l, np.float64).reshape(-1, 4)
     sr = np.asarray(segs_r, np.float64).reshape(-1, 4)
     n_l, n_r = len(sl), len(sr)
     stats = {"left": n_l, "right": n_r, "horizontal": 0, "candidates": 0, "matched": 0}
+    none = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 2)), stats)
     if n_l == 0 or n_r == 0:
-        return _empty(stats)
+        return none
 
     dl, dr = sl[:, 2:] - sl[:, :2], sr[:, 2:] - sr[:, :2]
     len_l = np.hypot(dl[:, 0], dl[:, 1])
@@ -68,7 +70,7 @@ def match_stereo_lines(segs_l: np.ndarray, desc_l: np.ndarray, segs_r: np.ndarra
     stats["horizontal"] = int((~steep).sum())
     q = np.flatnonzero(steep)
     if len(q) == 0:
-        return _empty(stats)
+        return none
 
     lo_l, hi_l = np.minimum(sl[:, 1], sl[:, 3]), np.maximum(sl[:, 1], sl[:, 3])
     lo_r, hi_r = np.minimum(sr[:, 1], sr[:, 3]), np.maximum(sr[:, 1], sr[:, 3])
@@ -96,6 +98,24 @@ def match_stereo_lines(segs_l: np.ndarray, desc_l: np.ndarray, segs_r: np.ndarra
     ok = ((disp >= params.min_disparity) & (disp <= max_disp)).all(axis=1)
     li, rj, overlap, disp = li[ok], rj[ok], overlap[ok], disp[ok]
     stats["candidates"] = int(len(li))
+    return li, rj, overlap, disp, stats
+
+
+def right_segments_in_reach(segs_l: np.ndarray, segs_r: np.ndarray, calib: StereoCalibration,
+                            params: LineParams) -> np.ndarray:
+    """Mask of the right segments that are a stereo candidate of some left segment: only these
+    can be matched, so only these need an LBD descriptor."""
+    rj = stereo_candidates(segs_l, segs_r, calib, params)[1]
+    mask = np.zeros(len(np.asarray(segs_r).reshape(-1, 4)), bool)
+    mask[rj] = True
+    return mask
+
+
+def match_stereo_lines(segs_l: np.ndarray, desc_l: np.ndarray, segs_r: np.ndarray, desc_r: np.ndarray,
+                       calib: StereoCalibration, params: LineParams) -> StereoLines:
+    sl = np.asarray(segs_l, np.float64).reshape(-1, 4)
+    n_l = len(sl)
+    li, rj, overlap, disp, stats = stereo_candidates(segs_l, segs_r, calib, params)
     if len(li) == 0:
         return _empty(stats)
 
