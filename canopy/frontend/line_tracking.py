@@ -7,7 +7,7 @@
   both its endpoints lie within ``radius`` px of the projected infinite line and it overlaps
   the projected segment along the line; among candidates the best LBD Hamming distance wins
   (threshold + ratio test), each segment kept for its closest map line.
-* ``refine_pose_points_lines``: ``canopy.frontend.pose.refine_pose`` with Eq. 10 line
+* ``LineTerms`` / ``refine_pose_points_lines``: ``canopy.frontend.pose.refine_pose`` with Eq. 10 line
   residuals (distances of the projected 3D endpoints to the observed infinite line) added
   to the Gauss-Newton normal equations, weighted by Sigma^-1 = I / line_sigma^2 (Eq. 11),
   with the same Huber kernel and chi-square outlier rounds as the points.
@@ -21,9 +21,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from canopy.frontend.geometry import pose_information, se3_exp, stereo_pose_jacobian, transform
+from canopy.frontend.geometry import transform
 from canopy.frontend.matching import as_words, best_two, hamming_pairs, unique_by_reference
-from canopy.frontend.pose import PoseEstimate, measurement_chi2
+from canopy.frontend.pose import PoseEstimate, refine_pose
 from canopy.lines import line_coefficients
 from shared.types import StereoCalibration
 
@@ -183,76 +183,56 @@ class PointLineEstimate(PoseEstimate):
     line_chi2: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
+class LineTerms:
+    """The Eq. 10 line residuals as extra terms of ``refine_pose`` (Eq. 11 weights
+    Sigma^-1 = I / line_sigma^2, Huber width sqrt(chi2_line), chi-square outlier rounds)."""
+
+    def __init__(self, A_w, B_w, coeffs, line_sigma: float, chi2_line: float, calib: StereoCalibration):
+        self.A_w = np.asarray(A_w, float).reshape(-1, 3)
+        self.B_w = np.asarray(B_w, float).reshape(-1, 3)
+        self.coeffs = np.asarray(coeffs, float).reshape(-1, 3)
+        self.sigma, self.chi2_line, self.calib = float(line_sigma), float(chi2_line), calib
+        self.k = np.sqrt(chi2_line)
+        self.inliers = np.ones(len(self.A_w), bool)
+        self.chi2 = np.zeros(len(self.A_w))
+
+    def start_round(self) -> int:
+        lidx = np.flatnonzero(self.inliers)
+        self._A, self._B, self._c = self.A_w[lidx], self.B_w[lidx], self.coeffs[lidx]
+        return 2 * len(lidx)
+
+    def normal_equations(self, T_cw: np.ndarray, robust: bool) -> tuple[np.ndarray, np.ndarray]:
+        if len(self._A) == 0:
+            return np.zeros((6, 6)), np.zeros(6)
+        # Eq. 10: e = (l . pi~(T A), l . pi~(T B)); the residual to drive to zero is -e
+        e, Jl, fin = _line_terms(T_cw, self._A, self._B, self._c, self.calib)
+        lchi2 = (e**2).sum(axis=1) / self.sigma**2
+        fin &= np.isfinite(lchi2)
+        wl = np.where(fin, 1.0 / self.sigma**2, 0.0)
+        if robust:
+            el = np.sqrt(np.where(fin, lchi2, 0.0))
+            wl = wl * np.where(el <= self.k, 1.0, self.k / np.maximum(el, 1e-12))
+        Jf = np.where(fin[:, None, None], Jl, 0.0).reshape(-1, 6)
+        Jw = Jf * np.repeat(wl, 2)[:, None]
+        return Jw.T @ Jf, -(Jw.T @ np.where(fin[:, None], e, 0.0).reshape(-1))
+
+    def classify(self, T_cw: np.ndarray) -> None:
+        self.chi2 = line_chi2(T_cw, self.A_w, self.B_w, self.coeffs, self.sigma, self.calib)
+        self.inliers = self.chi2 <= self.chi2_line
+
+    def information(self, T_cw: np.ndarray) -> np.ndarray:
+        m = self.inliers
+        return line_information(T_cw, self.A_w[m], self.B_w[m], self.coeffs[m], self.sigma, self.calib)
+
+
 def refine_pose_points_lines(T_cw: np.ndarray, X_w: np.ndarray, meas: np.ndarray, has_right: np.ndarray,
                              sigma: np.ndarray, calib: StereoCalibration, rounds: int, iterations: int,
                              chi2_mono: float, chi2_stereo: float, A_w: np.ndarray, B_w: np.ndarray,
                              coeffs: np.ndarray, line_sigma: float, chi2_line: float,
                              inliers: np.ndarray | None = None) -> PointLineEstimate:
-    """Motion-only Gauss-Newton on AGRI Eq. 11 with the map fixed: point terms (Eq. 9, stereo
-    (u_l, v, u_r) as ``refine_pose``) plus line terms (Eq. 10), Huber-robust, outlier rounds."""
-    X_w = np.asarray(X_w, float).reshape(-1, 3)
-    meas = np.asarray(meas, float).reshape(-1, 3)
-    hr = np.asarray(has_right, float).reshape(-1)
-    sigma = np.asarray(sigma, float).reshape(-1)
-    A_w, B_w = np.asarray(A_w, float).reshape(-1, 3), np.asarray(B_w, float).reshape(-1, 3)
-    coeffs = np.asarray(coeffs, float).reshape(-1, 3)
-    thr = np.where(hr > 0, chi2_stereo, chi2_mono)
-    k_line = np.sqrt(chi2_line)
-    inl = np.ones(len(X_w), bool) if inliers is None else inliers.copy()
-    linl = np.ones(len(A_w), bool)
-    T = T_cw.copy()
-    for rnd in range(rounds):
-        robust = rnd < rounds - 1
-        # the inlier sets change between rounds only
-        idx, lidx = np.flatnonzero(inl), np.flatnonzero(linl)
-        Xr, mr, hrr, sr, kr = X_w[idx], meas[idx], hr[idx], sigma[idx], np.sqrt(thr[idx])
-        Ar, Br, cr = A_w[lidx], B_w[lidx], coeffs[lidx]
-        for _ in range(iterations if 3 * len(idx) + 2 * len(lidx) >= 6 else 0):
-            H, g = np.zeros((6, 6)), np.zeros(6)
-            if len(idx):
-                chi2, r, Pc = measurement_chi2(T, Xr, mr, hrr, sr, calib)
-                front = np.isfinite(chi2)
-                w = np.where(front, 1.0 / sr**2, 0.0)
-                if robust:
-                    e = np.sqrt(np.where(front, chi2, 0.0))
-                    w = w * np.where(e <= kr, 1.0, kr / np.maximum(e, 1e-12))
-                Pc = np.where(front[:, None], Pc, 1.0)  # rows behind the camera carry zero weight
-                r = np.where(front[:, None], r, 0.0)
-                J = stereo_pose_jacobian(Pc, calib).reshape(-1, 6)
-                W = np.repeat(w[:, None], 3, axis=1)
-                W[:, 2] *= hrr
-                JW = J * W.reshape(-1, 1)
-                H += JW.T @ J
-                g += JW.T @ r.reshape(-1)
-            if len(lidx):
-                # Eq. 10: e = (l . pi~(T A), l . pi~(T B)); residual to drive to zero is -e
-                e, Jl, fin = _line_terms(T, Ar, Br, cr, calib)
-                lchi2 = (e**2).sum(axis=1) / line_sigma**2
-                fin &= np.isfinite(lchi2)
-                wl = np.where(fin, 1.0 / line_sigma**2, 0.0)
-                if robust:
-                    el = np.sqrt(np.where(fin, lchi2, 0.0))
-                    wl = wl * np.where(el <= k_line, 1.0, k_line / np.maximum(el, 1e-12))
-                Jf = np.where(fin[:, None, None], Jl, 0.0).reshape(-1, 6)
-                Jw = Jf * np.repeat(wl, 2)[:, None]
-                H += Jw.T @ Jf
-                g -= Jw.T @ np.where(fin[:, None], e, 0.0).reshape(-1)
-            try:
-                dx = np.linalg.solve(H, g)
-            except np.linalg.LinAlgError:
-                break
-            T = se3_exp(dx) @ T
-            if np.linalg.norm(dx) < _CONVERGED_STEP:
-                break
-        chi2, _, _ = measurement_chi2(T, X_w, meas, hr, sigma, calib)
-        inl = chi2 <= thr
-        linl = line_chi2(T, A_w, B_w, coeffs, line_sigma, calib) <= chi2_line
-    chi2, _, Pc = measurement_chi2(T, X_w, meas, hr, sigma, calib)
-    inl = chi2 <= thr
-    lchi2 = line_chi2(T, A_w, B_w, coeffs, line_sigma, calib)
-    linl = lchi2 <= chi2_line
-    info = np.zeros((6, 6))
-    if inl.any():
-        info += pose_information(stereo_pose_jacobian(Pc[inl], calib), sigma[inl], hr[inl])
-    info += line_information(T, A_w[linl], B_w[linl], coeffs[linl], line_sigma, calib)
-    return PointLineEstimate(T, inl, info, chi2, linl, lchi2)
+    """Motion-only Gauss-Newton on AGRI Eq. 11 with the map fixed: the point terms of
+    ``refine_pose`` (Eq. 9) plus the line terms of Eq. 10."""
+    lines = LineTerms(A_w, B_w, coeffs, line_sigma, chi2_line, calib)
+    est = refine_pose(T_cw, X_w, meas, has_right, sigma, calib, rounds, iterations, chi2_mono, chi2_stereo,
+                      inliers=inliers, extra=lines)
+    return PointLineEstimate(est.T_cam_world, est.inliers, est.information, est.chi2, lines.inliers, lines.chi2)
