@@ -134,7 +134,7 @@ class RunCollector:
     def write_frames_csv(self, path: Path) -> Path:
         """One row per frame: tracking outcome, enhancement decision and timings."""
         cols = ["index", "timestamp", "status", "keyframe", "inliers", "matches", "enhance_method",
-                "mean_in", "mean_out", "enhance_ms", "orb_ms", "stereo_ms", "tracking_ms"]
+                "mean_in", "mean_out", "enhance_ms", "orb_ms", "stereo_ms", "tracking_ms", "lines", "line_inliers"]
         rows = [",".join(cols)]
         for idx in sorted(self.poses):
             p = self.poses[idx]
@@ -146,7 +146,8 @@ class RunCollector:
             rows.append(",".join([str(p.index), f"{p.timestamp:.9f}", p.status, str(int(p.is_keyframe)),
                                   str(p.n_inliers), str(p.n_matches), str(e.get("method", "")),
                                   num(e.get("mean_in")), num(e.get("mean_out")), num(t.get("enhance")),
-                                  num(t.get("orb")), num(t.get("stereo")), num(t.get("total"))]))
+                                  num(t.get("orb")), num(t.get("stereo")), num(t.get("total")),
+                                  str(p.n_lines), str(p.n_line_inliers)]))
         path.write_text("\n".join(rows) + "\n")
         return path
 

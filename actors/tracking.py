@@ -99,7 +99,10 @@ class TrackingActor(Actor):
                          status=res.status, n_inliers=int(res.n_inliers), n_matches=int(res.n_matches),
                          is_keyframe=bool(res.is_keyframe), ref_keyframe=int(ref),
                          T_ref_cam=T_ref_cam, timings_ms=timings, sent_at=time.time(),
-                         enhancement={k: v for k, v in handle.info.items() if k != "enhance_ms"})
+                         enhancement={k: v for k, v in handle.info.items() if k != "enhance_ms"},
+                         n_lines=int(res.n_lines), n_line_inliers=int(res.n_line_inliers))
+        for reason, n in res.line_rejected.items():  # degenerate segments, counted never fatal
+            self.counts[f"lines_rejected_{reason}"] = self.counts.get(f"lines_rejected_{reason}", 0) + n
         ctx.publish(pose)
         if ctx.has_output("recorder"):  # never block tracking on the recorder
             ctx.send("recorder", pose, block=False)

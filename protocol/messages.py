@@ -110,6 +110,8 @@ class FramePose:
     timings_ms: dict = field(default_factory=dict)
     sent_at: float = 0.0
     enhancement: dict = field(default_factory=dict)  # method used, image statistics before/after
+    n_lines: int = 0            # left segments detected (0 without --lines)
+    n_line_inliers: int = 0     # line matches kept by the pose refinement
 
 
 @message("map_snapshot")

@@ -182,6 +182,9 @@ def test_lines_flow_through_the_actors(tmp_path):
     assert metrics["run"]["lines"] is True and metrics["map_lines"] > 20
     header = (out / "map_lines.ply").read_bytes().split(b"end_header")[0].decode()
     assert f"element edge {metrics['map_lines']}" in header
+    rows = (out / "frames.csv").read_text().splitlines()
+    assert rows[0].endswith(",lines,line_inliers")
+    assert all(int(r.split(",")[-2]) > 0 for r in rows[2:])  # per-frame line counts after the first frame
     em = metrics["est_motion"]  # static MAV: lines must not add drift
     assert em["translation_m"] < 0.01 and em["rotation_deg"] < 0.5
 

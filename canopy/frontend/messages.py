@@ -37,3 +37,4 @@ class TrackingResult:
     n_lines: int = 0             # left segments detected (0 when tracking runs without lines)
     n_line_matches: int = 0      # segments matched to map lines
     n_line_inliers: int = 0      # line matches kept by the pose refinement
+    line_rejected: dict = field(default_factory=dict)  # degenerate segments dropped at the boundary, by reason

@@ -28,6 +28,7 @@ if TYPE_CHECKING:
     from canopy.frontend.line_tracking import LineFrame
 
 STATUS_INIT, STATUS_OK, STATUS_LOST = "init", "ok", "lost"
+LINE_REJECT_REASONS = ("nan", "zero_length", "outside", "short")  # canopy.lines.detect_segments stats
 
 
 def _ms(t0: float) -> float:
@@ -619,4 +620,5 @@ class Tracker:
             res.n_lines = len(lines)
             res.n_line_matches = len(lq)
             res.n_line_inliers = int(est.line_inliers.sum())
+            res.line_rejected = {k: int(lines.stats.get(k, 0)) for k in LINE_REJECT_REASONS}
         return res
