@@ -303,3 +303,30 @@ def test_batched_residuals_match_single():
         assert np.allclose(e[i], line_reprojection_error(T, A[i], B[i], L[i], CALIB))
         jp, jx = line_reprojection_jacobians(T, A[i], B[i], L[i], CALIB)
         assert np.allclose(J_pose[i], jp) and np.allclose(J_A[i], jx[0, :3]) and np.allclose(J_B[i], jx[1, 3:])
+
+
+def test_a_longer_view_extends_a_line_landmark():
+    """Issue 4 item 3: the landmark holds the middle of a post; a view of the whole post
+    extends it to the true endpoints; a partial view never shortens it."""
+    from canopy.lines.geometry import extend_segment
+    from shared.types import StereoCalibration
+
+    calib = StereoCalibration(435.0, 435.0, 376.0, 240.0, 0.11, 752, 480)
+    top, bottom = np.array([0.5, -1.0, 5.0]), np.array([0.6, 1.0, 5.5])  # true 3D post, world = camera 0
+    A, B = top + 0.3 * (bottom - top), top + 0.6 * (bottom - top)      # the landmark: its middle only
+    T_wc = np.eye(4)
+    T_wc[:3, 3] = [0.3, 0.1, -0.5]  # a second viewpoint
+
+    def project(X):
+        Pc = X - T_wc[:3, 3]
+        return np.array([calib.fx * Pc[0] / Pc[2] + calib.cx, calib.fy * Pc[1] / Pc[2] + calib.cy])
+
+    full = np.concatenate([project(top), project(bottom)])
+    A2, B2 = extend_segment(A, B, full, T_wc, calib, max_growth=2.0)
+    np.testing.assert_allclose(A2, top, atol=1e-9)
+    np.testing.assert_allclose(B2, bottom, atol=1e-9)
+    partial = np.concatenate([project(top + 0.4 * (bottom - top)), project(top + 0.5 * (bottom - top))])
+    A3, B3 = extend_segment(A, B, partial, T_wc, calib)
+    np.testing.assert_allclose(A3, A) and np.testing.assert_allclose(B3, B)
+    capped = extend_segment(A, B, full, T_wc, calib, max_growth=0.5)  # growth per update is bounded
+    assert np.linalg.norm(capped[1] - capped[0]) <= 2.0 * np.linalg.norm(B - A) + 1e-9

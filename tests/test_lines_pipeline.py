@@ -237,7 +237,8 @@ def test_lines_without_a_right_view_stay_out_of_ba():
     depth for a still camera: it stays out of BA, endpoints untouched, observations kept."""
     rng = np.random.default_rng(5)
     kfs, _, _ = _synthetic_keyframes(rng)
-    mapper = LocalMapper(CALIB, MappingParams(use_lines=True, covisibility_min_shared=5))
+    # line_max_growth=0: no extension on insertion, so any endpoint change would come from BA
+    mapper = LocalMapper(CALIB, MappingParams(use_lines=True, covisibility_min_shared=5, line_max_growth=0.0))
     mapper.insert_keyframe(kfs[0])
     mapper.keyframes[kfs[0].index].line_coeffs_right[0] = np.nan  # line 0: left views only
     ends0 = mapper.lines[0].endpoints.copy()

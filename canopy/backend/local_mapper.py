@@ -21,6 +21,7 @@ from canopy.frontend.geometry import se3_inv
 from canopy.frontend.matching import as_words, _popcount64
 from canopy.frontend.messages import KeyframeData, LocalMapUpdate
 from canopy.lines import line_coefficients
+from canopy.lines.geometry import extend_segment
 from shared.types import StereoCalibration, Trajectory
 
 X = gtsam.symbol_shorthand.X
@@ -198,6 +199,9 @@ class LocalMapper:
             ln.obs[kf.index] = j
             ln.descriptor = rec.line_descriptors[j].copy()
             rec.line_landmark[j] = ln.id
+            # a longer view of the line extends the landmark (BA then refines the endpoints)
+            ln.endpoints = np.stack(extend_segment(ln.endpoints[0], ln.endpoints[1], kf.line_segments[j],
+                                                   rec.T_world_cam, self.calib, self.params.line_max_growth))
         P = np.asarray(kf.line_endpoints_cam, np.float64).reshape(-1, 2, 3)
         idx = np.flatnonzero((kf.new_line_ids >= 0) & (rec.line_landmark < 0) & np.isfinite(P).all(axis=(1, 2)))
         Pw = (P[idx].reshape(-1, 3) @ rec.T_world_cam[:3, :3].T + rec.T_world_cam[:3, 3]).reshape(-1, 2, 3)

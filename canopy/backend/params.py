@@ -32,6 +32,7 @@ class MappingParams:
     # observation adds Eq. 10 (distances of the projected endpoints to the observed infinite
     # line; also in the right image where the keyframe matched the line in stereo).
     use_lines: bool = False
+    line_max_growth: float = 1.0        # a new observation may extend a line landmark by at most this x its length
     # "projection": one GenericProjectionFactor per endpoint whose measurement is the foot of
     # the perpendicular on the observed line, with a noise model tight along the line normal
     # (line_sigma) and loose along the line (line_sigma_along): its whitened error is Eq. 10
@@ -79,6 +80,7 @@ class MappingParams:
         need(self.fixed_pose_sigma > 0, "fixed_pose_sigma", "must be > 0")
         need(self.line_factor in ("projection", "custom"), "line_factor", "must be 'projection' or 'custom'")
         need(self.line_sigma > 0 and self.line_sigma_along > 0, "line_sigma", "and line_sigma_along must be > 0")
+        need(self.line_max_growth >= 0, "line_max_growth", "must be >= 0")
         need(self.huber_line > 0 and self.chi2_line > 0, "huber_line", "and chi2_line must be > 0")
         need(self.line_min_observations >= 1, "line_min_observations", "must be >= 1")
         need(self.line_ba_min_keyframes >= 1, "line_ba_min_keyframes", "must be >= 1")

@@ -76,3 +76,38 @@ def line_reprojection_jacobians(T_cw: np.ndarray, A_w: np.ndarray, B_w: np.ndarr
     J_pts[0, :3] = J_A[0]
     J_pts[1, 3:] = J_B[0]
     return J_pose[0], J_pts
+
+
+def extend_segment(A_w: np.ndarray, B_w: np.ndarray, segment_uv: np.ndarray, T_world_cam: np.ndarray,
+                   calib: StereoCalibration, max_growth: float = 1.0,
+                   min_ray_angle_deg: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
+    """Extend a line landmark's 3D segment to cover a new observation (issue 4 item 3).
+
+    Each observed endpoint's viewing ray is intersected (closest point) with the
+    landmark's infinite 3D line A + s (B - A); the segment grows to span s in
+    [min(0, s1, s2), max(1, s1, s2)], as PL-SLAM does when a longer view of a line
+    arrives. Endpoints are only pushed outwards, never inwards (a partial view does
+    not shorten a line), growth per update is capped at ``max_growth`` times the
+    current length, and rays nearly parallel to the line (no reliable closest point)
+    are ignored.
+    """
+    A_w, B_w = np.asarray(A_w, float), np.asarray(B_w, float)
+    d = B_w - A_w
+    length2 = float(d @ d)
+    if not np.isfinite(length2) or length2 < 1e-12:
+        return A_w, B_w
+    uv = np.asarray(segment_uv, float).reshape(2, 2)
+    R, C = T_world_cam[:3, :3], T_world_cam[:3, 3]
+    rays = np.column_stack([(uv[:, 0] - calib.cx) / calib.fx, (uv[:, 1] - calib.cy) / calib.fy, np.ones(2)]) @ R.T
+    w0 = A_w - C
+    a, c = length2, np.einsum("ij,ij->i", rays, rays)
+    b = rays @ d
+    denom = a * c - b**2
+    # sin^2 of the ray/line angle = denom / (a c); too small = parallel, no closest point
+    ok = denom > (a * c) * np.sin(np.radians(min_ray_angle_deg)) ** 2
+    if not ok.any():
+        return A_w, B_w
+    s = (b * (rays @ w0) - c * (d @ w0)) / np.where(ok, denom, 1.0)
+    s = np.clip(s[ok], -max_growth, 1.0 + max_growth)
+    lo, hi = min(0.0, float(s.min())), max(1.0, float(s.max()))
+    return A_w + lo * d, A_w + hi * d
