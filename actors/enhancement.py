@@ -35,7 +35,8 @@ class EnhancementActor(Actor):
         self.in_ring = FrameRing.attach(self.config["in_ring"])
         self.out_ring = FrameRing.attach(self.config["out_ring"])
         self.enhancer = make_enhancer(self.config["params"])
-        self.backlog = FrameBacklog(max_frame_age(self.config["clock"], self.config["frame_period_s"]))
+        self.backlog = FrameBacklog(max_frame_age(self.config["clock"], self.config["frame_period_s"],
+                                                  self.config["max_lag_frames"]))
         self.methods: dict[str, int] = {}
 
     def on_message(self, msg, ctx: ActorContext) -> None:

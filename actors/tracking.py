@@ -35,7 +35,7 @@ class TrackingActor(Actor):
         self.ring = FrameRing.attach(c["ring"])
         self.tracker = Tracker(c["calib"], c["params"])
         self.lockstep = c["clock"] == "lockstep"
-        self.backlog = FrameBacklog(max_frame_age(c["clock"], c["frame_period_s"]))
+        self.backlog = FrameBacklog(max_frame_age(c["clock"], c["frame_period_s"], c["max_lag_frames"]))
         self.wait_s = float(c.get("lockstep_wait_s", 60.0))
         enh = c.get("enhancement")
         self.adaptive_fast = bool(enh is not None and getattr(enh, "adaptive_fast", False)

@@ -68,8 +68,9 @@ def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_fra
     to_recorder = ["recorder"] if record else []
     events = f"ipc://{run_dir}/supervisor.events"
     rt = cfg.runtime
-    # In realtime a frame older than one frame period is skipped when a newer one waits.
-    common = {"clock": rt.clock, "frame_period_s": 1.0 / (frame_rate_hz * rt.realtime_speed)}
+    # In realtime a frame older than max_lag_frames periods is skipped when a newer one waits.
+    common = {"clock": rt.clock, "frame_period_s": 1.0 / (frame_rate_hz * rt.realtime_speed),
+              "max_lag_frames": rt.max_lag_frames}
 
     def spec(name, factory, config, outputs):
         return ActorSpec(name=name, factory=factory, config={**common, **config}, inbox=ep[name][0],

@@ -26,6 +26,7 @@ class RuntimeParams:
     ready_timeout_s: float = 90.0    # actors import OpenCV and GTSAM on start
     grace_s: float = 1.0             # how long actors get to stop before being killed
     realtime_speed: float = 1.0      # 2.0 plays the dataset twice as fast
+    max_lag_frames: float = 2.0      # realtime: a frame this many periods old is skipped if a newer one waits
     lockstep_wait_s: float = 60.0    # longest wait for a map update in lockstep
     map_snapshot_period_s: float = 0.5
     seed: int = 0
@@ -35,6 +36,8 @@ class RuntimeParams:
             raise ConfigError("runtime.clock", f"must be one of {CLOCK_MODES}, got {self.clock!r}")
         if self.ring_slots < 2:
             raise ConfigError("runtime.ring_slots", "needs at least 2 slots")
+        if self.max_lag_frames <= 0:
+            raise ConfigError("runtime.max_lag_frames", "must be > 0")
         if self.realtime_speed <= 0:
             raise ConfigError("runtime.realtime_speed", "must be > 0")
 
