@@ -217,7 +217,7 @@ def format_summary(summary: dict, outcome_reason: str, n_cores: int) -> str:
     kitti = m.get("kitti") or {}
     if kitti.get("t_rel_percent") is not None:
         lines.append(f"  KITTI t_rel / r_rel  {kitti['t_rel_percent']:.2f} %   {kitti['r_rel_deg_per_100m']:.3f} deg/100m "
-                     f"(segments of {', '.join(f'{x:g}' for x in kitti.get('lengths_used') or [])} m)")
+                     f"(segments of {', '.join(f'{x:.1f}' for x in kitti.get('lengths_used') or [])} m)")
     em = m.get("est_motion")
     if em:
         lines.append(f"  estimated motion     {em['translation_m']:.4f} m, {em['rotation_deg']:.3f} deg "
