@@ -22,7 +22,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import sys
@@ -42,6 +41,7 @@ from canopy.degrade import DegradeParams  # noqa: E402
 from canopy.enhance import EnhanceParams, adaptive_fast_threshold, detect_orb_adaptive, make_enhancer  # noqa: E402
 from canopy.frontend import OrbExtractor, TrackingParams, match_stereo  # noqa: E402
 from canopy.sources import open_source  # noqa: E402
+from canopy.report import write_json  # noqa: E402
 from tools.degrade_sequence import degrade_sequence  # noqa: E402
 
 SHARED_DATA = ROOT.parent / "shared" / "data"
@@ -228,10 +228,7 @@ def main(argv=None) -> int:
         "orb_lime_dicm": orb_rows,
         "stereo_sequences": stereo_rows,
     }
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2))
-    print(f"\nwrote {out}")
+    print(f"\nwrote {write_json(args.out, result)}")
     return 0
 
 

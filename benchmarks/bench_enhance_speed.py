@@ -10,7 +10,6 @@ on a darkened copy (radiance ×0.25, it decides ``agri``).
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import statistics
@@ -27,6 +26,7 @@ sys.path.insert(0, str(ROOT))
 
 from canopy.enhance import EnhanceParams, auto, dehaze_dark_channel  # noqa: E402
 from canopy.enhance.factory import METHOD_FUNCTIONS  # noqa: E402
+from canopy.report import write_json  # noqa: E402
 
 FRAMES = {
     "euroc_752x480": "euroc_v101_micro/mav0/cam0/data/1403715273262142976.png",
@@ -99,10 +99,7 @@ def main(argv=None) -> int:
         "targets_ms": {"agri": 3.0, "afe": 2.0},
         "rows": rows,
     }
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2))
-    print(f"wrote {out}")
+    print(f"\nwrote {write_json(args.out, result)}")
     return 0
 
 

@@ -56,6 +56,7 @@ from mcap.reader import NonSeekingReader
 from mcap.writer import CompressionType, Writer
 
 from shared.errors import InputError
+from canopy.report import to_jsonable
 from shared.geometry import rot_to_quat_wxyz
 
 LIBRARY = "canopy-slam recorder"
@@ -179,24 +180,6 @@ def _check_topic(topic: str) -> str:
     if not isinstance(topic, str) or not _TOPIC.match(topic) or len(topic) < 2:
         raise InputError("topic", f"topic must look like '/a/b' (letters, digits, _ . - /), got {topic!r}")
     return topic
-
-
-def _jsonable(value: Any) -> Any:
-    """Plain JSON values: numpy scalars and arrays become numbers and lists, NaN/inf become null
-    (Foxglove parses with JSON.parse, which rejects NaN)."""
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    if isinstance(value, np.generic):
-        return _jsonable(value.item())
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if value is None or isinstance(value, (bool, int, str)):
-        return value
-    return str(value)
 
 
 def _pose_json(T: np.ndarray) -> tuple[dict, dict]:
@@ -402,7 +385,7 @@ class McapRecorder:
             raise InputError("stats", f"actor name must be letters, digits, _ . -; got {actor!r}")
         if not isinstance(values, dict):
             raise InputError("stats", f"values for {actor!r} must be a dict, got {type(values).__name__}")
-        body = _jsonable(values)
+        body = to_jsonable(values)
         body.pop("timestamp", None)
         body.pop("actor", None)
         self._write(STATS_PREFIX + actor, "canopy.ActorStats", ns, {"timestamp": _time(ns), "actor": actor, **body})

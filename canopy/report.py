@@ -103,20 +103,22 @@ def write_ply_lines(path, endpoints, binary: bool = True,
 
 # --------------------------------------------------------------------------- JSON
 
-def _to_jsonable(obj):
+def to_jsonable(obj):
+    """Plain JSON values: numpy scalars and arrays become numbers and lists, NaN/inf become
+    null (JSON has none; Foxglove's JSON.parse rejects them), paths and unknowns strings."""
     if isinstance(obj, dict):
-        return {str(k): _to_jsonable(v) for k, v in obj.items()}
+        return {str(k): to_jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [_to_jsonable(v) for v in obj]
+        return [to_jsonable(v) for v in obj]
     if isinstance(obj, np.ndarray):
-        return _to_jsonable(obj.tolist())
+        return to_jsonable(obj.tolist())
     if isinstance(obj, np.generic):
-        return _to_jsonable(obj.item())
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None  # JSON has no NaN/inf
-    if isinstance(obj, Path):
-        return str(obj)
-    return obj
+        return to_jsonable(obj.item())
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if obj is None or isinstance(obj, (bool, int, str)):
+        return obj
+    return str(obj)
 
 
 def write_json(path, obj, indent: int = 2) -> Path:
@@ -125,7 +127,7 @@ def write_json(path, obj, indent: int = 2) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, "w", encoding="utf-8") as fh:
-        json.dump(_to_jsonable(obj), fh, indent=indent, allow_nan=False)
+        json.dump(to_jsonable(obj), fh, indent=indent, allow_nan=False)
         fh.write("\n")
     return path
 
