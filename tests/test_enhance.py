@@ -2,8 +2,9 @@
 
 The references below follow the papers' equations directly, in float64 with
 plain loops, on small crops of real images; the fast implementations must
-match them within one grey level. Real images come from ``data/`` (EuRoC,
-KITTI) and ``../shared/data`` (LOL, LIME/DICM, O-HAZE pairs).
+match them within one grey level. Real images come from the project's own
+``data/`` (EuRoC, KITTI, LOL, LIME/DICM, O-HAZE pairs; provenance in
+``data/README.md``).
 """
 from __future__ import annotations
 
@@ -22,15 +23,14 @@ from shared.errors import ConfigError, InputError
 from shared.params import params_from_mapping
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED_DATA = ROOT.parent / "shared" / "data"
+DATA = ROOT / "data"
 
 
-def _data(*candidates: str) -> Path:
-    for rel in candidates:
-        for base in (ROOT / "data", SHARED_DATA):
-            if (base / rel).exists():
-                return base / rel
-    raise FileNotFoundError(f"test data missing: {candidates} under {ROOT / 'data'} or {SHARED_DATA}")
+def _data(rel: str) -> Path:
+    path = DATA / rel
+    if not path.exists():
+        raise FileNotFoundError(f"test data missing: {path} (the project ships it under data/)")
+    return path
 
 
 def _read(path: Path, flags=cv2.IMREAD_COLOR) -> np.ndarray:

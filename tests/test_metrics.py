@@ -13,11 +13,11 @@ from canopy import metrics as M
 from canopy.trajectory_io import read_kitti, read_tum
 from shared.types import Trajectory
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+DATA = Path(__file__).resolve().parents[1] / "data"  # shipped with the project, see data/README.md
 EVO = DATA / "evo_reference" / "test" / "data"
 RES = EVO / "res_files"
 
-# evo's numbers as quoted in ../shared/data/README.md and PROVENANCE.md.
+# evo's numbers as quoted in data/evo_reference/PROVENANCE.md.
 APE_RMSE = {"ORB": 1.3034497146, "SPTAM": 3.7384879076}
 RPE_10M_RMSE = {"ORB": 0.2262613433, "SPTAM": 0.2760710904}
 RES_NAME = {"ORB": "orb", "SPTAM": "sptam"}

@@ -14,7 +14,7 @@ from canopy import trajectory_io as tio
 from shared.errors import InputError
 from shared.types import Trajectory
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+DATA = Path(__file__).resolve().parents[1] / "data"  # shipped with the project, see data/README.md
 EVO = DATA / "evo_reference" / "test" / "data"
 
 
