@@ -8,8 +8,29 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 
-from shared.errors import CanopyError
+from shared.errors import CanopyError, InputWarning
+
+
+class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Shows a flag's default only when it has a real one the help text does not already name."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if action.default in (None, False, argparse.SUPPRESS) or "default" in text:
+            return text
+        return super()._get_help_string(action)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None):
+    if issubclass(category, InputWarning):
+        print(f"warning: {message}", file=sys.stderr)  # one line naming the input, no source location
+    else:
+        _default_show_warning(message, category, filename, lineno, file, line)
+
+
+_default_show_warning = warnings.showwarning
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -17,7 +38,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="launch.py",
         description="Stereo visual SLAM for low light and haze. With no --path, runs on the "
                     "snippet of the dataset bundled in data/.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+        formatter_class=_HelpFormatter)
     p.add_argument("--dataset", choices=("euroc", "kitti", "folder", "synthetic"), default="euroc",
                    help="dataset layout: EuRoC ASL folder (mav0/), KITTI odometry sequence, a folder "
                         "with left/, right/ and calib.yaml, or a generated orchard sequence (see --preset)")
@@ -53,6 +74,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    warnings.showwarning = _show_warning
     if args.max_frames is not None and args.max_frames < 1:
         print("error: --max-frames must be at least 1", file=sys.stderr)
         return 2

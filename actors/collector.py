@@ -4,9 +4,19 @@ It receives every event the actors publish (poses, map snapshots, stats,
 errors), prints a progress line, and at the end — normal or not — writes
 whatever was computed: trajectories (TUM, readable by evo), the map as PLY,
 metrics.json, stats.json and a trajectory plot, then returns the summary.
+
+While the run goes, ``trajectory.tum`` and ``frames.csv`` grow a line per
+frame (flushed), so even a SIGKILL of the launcher leaves the frames done so
+far parseable; at the end the final files (poses re-expressed through the
+bundle-adjusted keyframes) replace them atomically (``os.replace``).
+
+Only frames with an estimated pose are in a trajectory: a lost frame's pose is
+a placeholder, never written. ``frames.csv`` has a row for every frame of the
+sequence and says why a frame has no pose (lost, dropped, not reached).
 """
 from __future__ import annotations
 
+import os
 import sys
 import time
 from dataclasses import dataclass, field
@@ -16,9 +26,91 @@ import numpy as np
 
 from canopy.metrics import evaluate_trajectory
 from canopy.report import plot_trajectory_png, write_json, write_ply_lines, write_ply_points
-from canopy.trajectory_io import write_tum
+from canopy.trajectory_io import POSE_DECIMALS, TUM_TIME_DECIMALS, write_tum
 from protocol.messages import ActorError, ActorStats, FramePose, MapSnapshot
+from shared.geometry import rot_to_quat_wxyz
 from shared.types import Trajectory
+
+TUM_HEADER = "# timestamp tx ty tz qx qy qz qw"
+FRAMES_COLUMNS = ["index", "timestamp", "status", "reason", "keyframe", "inliers", "matches", "enhance_method",
+                  "mean_in", "mean_out", "enhance_ms", "orb_ms", "stereo_ms", "tracking_ms", "lines",
+                  "line_inliers"]
+# Statuses of frames that have an estimated pose (a "lost" frame's T_world_cam is a placeholder).
+POSED_STATUSES = ("init", "ok")
+# Frames with no FramePose at all: skipped to keep up with the clock, or never reached.
+STATUS_DROPPED, STATUS_NOT_REACHED = "dropped", "not_reached"
+REASON_LOST_DEFAULT = "tracking lost"
+REASON_DROPPED = "skipped by an actor to keep up with the realtime clock"
+REASON_NOT_REACHED = "not reached: the run ended before this frame"
+
+
+def has_pose(p: FramePose) -> bool:
+    return p.status in POSED_STATUSES
+
+
+def tum_line(stamp: float, T: np.ndarray) -> str:
+    """One TUM row ``t x y z qx qy qz qw`` in the format of ``canopy.trajectory_io.write_tum``."""
+    q = rot_to_quat_wxyz(np.asarray(T)[None, :3, :3])[0]
+    vals = [*np.asarray(T)[:3, 3], q[1], q[2], q[3], q[0]]
+    return f"{stamp:.{TUM_TIME_DECIMALS}f} " + " ".join(f"{v:.{POSE_DECIMALS}f}" for v in vals)
+
+
+def _num(v) -> str:
+    return "" if v is None else f"{float(v):.3f}"
+
+
+def frame_row(p: FramePose) -> str:
+    e, t = p.enhancement, p.timings_ms
+    reason = "" if has_pose(p) else (getattr(p, "reason", "") or REASON_LOST_DEFAULT)
+    return ",".join([str(p.index), f"{p.timestamp:.9f}", p.status, _csv_text(reason), str(int(p.is_keyframe)),
+                     str(p.n_inliers), str(p.n_matches), _csv_text(str(e.get("method", ""))),
+                     _num(e.get("mean_in")), _num(e.get("mean_out")), _num(t.get("enhance")),
+                     _num(t.get("orb")), _num(t.get("stereo")), _num(t.get("total")),
+                     str(p.n_lines), str(p.n_line_inliers)])
+
+
+def missing_row(index: int, stamp: float | None, status: str, reason: str) -> str:
+    cells = [str(index), "" if stamp is None else f"{stamp:.9f}", status, _csv_text(reason)]
+    return ",".join(cells + [""] * (len(FRAMES_COLUMNS) - len(cells)))
+
+
+def _csv_text(text: str) -> str:
+    return text.replace(",", ";").replace("\n", " ")
+
+
+class IncrementalFiles:
+    """``trajectory.tum`` and ``frames.csv`` written a line per frame as results arrive."""
+
+    def __init__(self, out_dir: Path):
+        self.trajectory_path = out_dir / "trajectory.tum"
+        self.frames_path = out_dir / "frames.csv"
+        # Line buffered: each line reaches the OS as soon as it is written, so a SIGKILL of the
+        # launcher loses at most the line being written.
+        self._traj = open(self.trajectory_path, "w", encoding="utf-8", buffering=1)
+        self._frames = open(self.frames_path, "w", encoding="utf-8", buffering=1)
+        self._traj.write(TUM_HEADER + "\n")
+        self._frames.write(",".join(FRAMES_COLUMNS) + "\n")
+
+    def add(self, p: FramePose) -> None:
+        if self._traj is None:
+            return
+        if has_pose(p):
+            self._traj.write(tum_line(p.timestamp, p.T_world_cam) + "\n")
+        self._frames.write(frame_row(p) + "\n")
+
+    def close(self) -> None:
+        for fh in (self._traj, self._frames):
+            if fh is not None:
+                fh.close()
+        self._traj = self._frames = None
+
+
+def replace_atomically(path: Path, write) -> Path:
+    """``write(tmp_path)`` then rename over ``path``: a reader sees the old or the new file, whole."""
+    tmp = path.with_name(path.name + ".tmp")
+    write(tmp)
+    os.replace(tmp, path)
+    return path
 
 ACTOR_ORDER = ("source", "enhancement", "tracking", "local_mapping", "loop_closing")
 
@@ -53,8 +145,11 @@ class ActorRecord:
 
 
 class RunCollector:
-    def __init__(self, n_frames: int, progress: bool = True, stream=sys.stderr):
+    def __init__(self, n_frames: int, progress: bool = True, stream=sys.stderr, out_dir: Path | None = None,
+                 frame_stamps=None):
         self.n_frames = n_frames
+        self.frame_stamps = None if frame_stamps is None else np.asarray(frame_stamps, np.float64)
+        self.incremental = IncrementalFiles(Path(out_dir)) if out_dir is not None else None
         self.poses: dict[int, FramePose] = {}
         self.snapshot: MapSnapshot | None = None
         self.actors: dict[str, ActorRecord] = {}
@@ -71,6 +166,8 @@ class RunCollector:
             if self._first_pose_t is None:
                 self._first_pose_t = time.monotonic()
             self.poses[msg.index] = msg
+            if self.incremental is not None:
+                self.incremental.add(msg)
             self._print_progress()
         elif isinstance(msg, MapSnapshot):
             self.snapshot = msg
@@ -96,7 +193,7 @@ class RunCollector:
             return
         self._last_print = now
         n = len(self.poses)
-        lost = sum(p.status == "lost" for p in self.poses.values())
+        lost = sum(not has_pose(p) for p in self.poses.values())
         kfs = sum(p.is_keyframe for p in self.poses.values())
         fps = n / max(now - (self._first_pose_t or now), 1e-6) if n > 1 else 0.0
         line = f"  frame {n:5d}/{self.n_frames}  keyframes {kfs:4d}  lost {lost:4d}  {fps:6.1f} fps "
@@ -112,7 +209,7 @@ class RunCollector:
     # -- trajectories --------------------------------------------------------------------
     def keyframe_trajectory(self) -> Trajectory:
         if self.snapshot is None or len(self.snapshot.keyframe_indices) == 0:
-            kf = [p for _, p in sorted(self.poses.items()) if p.is_keyframe]
+            kf = [p for _, p in sorted(self.poses.items()) if p.is_keyframe and has_pose(p)]
             return Trajectory([p.timestamp for p in kf], np.array([p.T_world_cam for p in kf]).reshape(-1, 4, 4))
         order = np.argsort(self.snapshot.keyframe_indices)
         return Trajectory(self.snapshot.keyframe_stamps[order], self.snapshot.keyframe_poses[order])
@@ -125,40 +222,49 @@ class RunCollector:
         stamps, poses = [], []
         for idx in sorted(self.poses):
             p = self.poses[idx]
+            if not has_pose(p):
+                continue  # no estimate: a placeholder pose would be a fabricated one
             T_w_ref = corrected.get(int(p.ref_keyframe))
             poses.append(T_w_ref @ p.T_ref_cam if T_w_ref is not None else p.T_world_cam)
             stamps.append(p.timestamp)
         return Trajectory(stamps, np.array(poses).reshape(-1, 4, 4))
 
     # -- outputs -------------------------------------------------------------------------
-    def write_frames_csv(self, path: Path) -> Path:
-        """One row per frame: tracking outcome, enhancement decision and timings."""
-        cols = ["index", "timestamp", "status", "keyframe", "inliers", "matches", "enhance_method",
-                "mean_in", "mean_out", "enhance_ms", "orb_ms", "stereo_ms", "tracking_ms", "lines", "line_inliers"]
-        rows = [",".join(cols)]
-        for idx in sorted(self.poses):
-            p = self.poses[idx]
-            e, t = p.enhancement, p.timings_ms
+    def frame_rows(self, run_ended_early: bool) -> list[str]:
+        """One row per frame of the sequence: tracking outcome, enhancement decision and timings,
+        and for a frame without a pose, why (lost / dropped / not reached)."""
+        rows = [",".join(FRAMES_COLUMNS)]
+        last = max(self.poses, default=-1)
+        for idx in range(max(self.n_frames, last + 1)):
+            p = self.poses.get(idx)
+            if p is not None:
+                rows.append(frame_row(p))
+                continue
+            stamp = float(self.frame_stamps[idx]) if self.frame_stamps is not None and idx < len(
+                self.frame_stamps) else None
+            if idx > last and run_ended_early:
+                rows.append(missing_row(idx, stamp, STATUS_NOT_REACHED, REASON_NOT_REACHED))
+            else:
+                rows.append(missing_row(idx, stamp, STATUS_DROPPED, REASON_DROPPED))
+        return rows
 
-            def num(v):
-                return "" if v is None else f"{float(v):.3f}"
+    def write_frames_csv(self, path: Path, run_ended_early: bool = False) -> Path:
+        rows = self.frame_rows(run_ended_early)
+        return replace_atomically(path, lambda tmp: tmp.write_text("\n".join(rows) + "\n"))
 
-            rows.append(",".join([str(p.index), f"{p.timestamp:.9f}", p.status, str(int(p.is_keyframe)),
-                                  str(p.n_inliers), str(p.n_matches), str(e.get("method", "")),
-                                  num(e.get("mean_in")), num(e.get("mean_out")), num(t.get("enhance")),
-                                  num(t.get("orb")), num(t.get("stereo")), num(t.get("total")),
-                                  str(p.n_lines), str(p.n_line_inliers)]))
-        path.write_text("\n".join(rows) + "\n")
-        return path
-
-    def tracking_summary(self) -> dict:
-        statuses = [p.status for p in self.poses.values()]
-        n = len(statuses)
-        lost = statuses.count("lost")
-        return {"frames_total": self.n_frames, "frames_processed": n, "frames_lost": lost,
+    def tracking_summary(self, run_ended_early: bool = False) -> dict:
+        """Counts over the whole sequence: a dropped or lost frame counts against success."""
+        rows = self.frame_rows(run_ended_early)[1:]
+        status = [r.split(",", 3)[2] for r in rows]
+        total = max(self.n_frames, len(rows))
+        tracked = sum(s in POSED_STATUSES for s in status)
+        n = len(self.poses)
+        return {"frames_total": total, "frames_processed": n, "frames_tracked": tracked,
+                "frames_lost": n - tracked, "frames_dropped": status.count(STATUS_DROPPED),
+                "frames_not_reached": status.count(STATUS_NOT_REACHED),
                 "keyframes": int(sum(p.is_keyframe for p in self.poses.values())),
-                "tracking_success_percent": 100.0 * (n - lost) / n if n else 0.0,
-                "coverage_percent": 100.0 * n / self.n_frames if self.n_frames else 0.0}
+                "tracking_success_percent": 100.0 * tracked / total if total else 0.0,
+                "coverage_percent": 100.0 * n / total if total else 0.0}
 
     def stats_summary(self) -> dict:
         names = sorted(self.actors, key=lambda a: ACTOR_ORDER.index(a) if a in ACTOR_ORDER else 99)
@@ -166,11 +272,16 @@ class RunCollector:
 
     def write_outputs(self, out_dir: Path, gt: Trajectory | None, run_info: dict) -> dict:
         out_dir.mkdir(parents=True, exist_ok=True)
+        if self.incremental is not None:
+            self.incremental.close()
+        early = not run_info.get("ok", True)
         cam = self.camera_trajectory()
         kfs = self.keyframe_trajectory()
         files = {}
         if len(cam):
-            files["trajectory"] = str(write_tum(out_dir / "trajectory.tum", cam))
+            files["trajectory"] = str(replace_atomically(out_dir / "trajectory.tum", lambda tmp: write_tum(tmp, cam)))
+        elif (out_dir / "trajectory.tum").exists():
+            (out_dir / "trajectory.tum").unlink()  # only the header was written: no frame has a pose
         if len(kfs):
             files["keyframes"] = str(write_tum(out_dir / "keyframes.tum", kfs))
         points = self.snapshot.points if self.snapshot is not None else np.zeros((0, 3), np.float32)
@@ -178,9 +289,9 @@ class RunCollector:
         lines = self.snapshot.lines if self.snapshot is not None else np.zeros((0, 2, 3), np.float32)
         if len(lines):
             files["map_lines"] = str(write_ply_lines(out_dir / "map_lines.ply", np.asarray(lines, np.float64)))
-        files["frames"] = str(self.write_frames_csv(out_dir / "frames.csv"))
+        files["frames"] = str(self.write_frames_csv(out_dir / "frames.csv", run_ended_early=early))
         metrics = evaluate_trajectory(cam, gt) if len(cam) else {"note": "no frame was tracked"}
-        metrics["tracking"] = self.tracking_summary()
+        metrics["tracking"] = self.tracking_summary(run_ended_early=early)
         metrics["map_points"] = int(len(points))
         metrics["map_lines"] = int(len(lines))
         metrics["run"] = run_info
@@ -202,8 +313,10 @@ def format_summary(summary: dict, outcome_reason: str, n_cores: int) -> str:
     lines = ["", "Canopy SLAM — run summary", "=" * 72,
              f"  outcome              {outcome_reason}",
              f"  frames               {t['frames_processed']}/{t['frames_total']} processed, "
-             f"{t['keyframes']} keyframes, {t['frames_lost']} lost",
-             f"  tracking success     {t['tracking_success_percent']:.1f} %",
+             f"{t['keyframes']} keyframes, {t['frames_lost']} lost, {t.get('frames_dropped', 0)} dropped"
+             + (f", {t['frames_not_reached']} not reached" if t.get("frames_not_reached") else ""),
+             f"  tracking success     {t['tracking_success_percent']:.1f} % "
+             f"({t.get('frames_tracked', 0)} of {t['frames_total']} frames have a pose)",
              f"  map                  {m.get('map_points', 0)} points, {m.get('map_lines', 0)} line segments"]
     ate = m.get("ate")
     if ate and ate.get("rmse") is not None:

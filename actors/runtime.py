@@ -23,6 +23,7 @@ import signal
 import sys
 import time
 import traceback
+import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -32,7 +33,7 @@ import zmq
 
 from protocol.codec import decode, encode
 from protocol.messages import ActorError, ActorReady, ActorStats, Shutdown
-from shared.errors import CanopyError
+from shared.errors import CanopyError, InputWarning
 
 STATS_PERIOD_S = 1.0
 
@@ -74,6 +75,9 @@ class ActorContext:
         self.blocked_s = 0.0  # time spent waiting on another actor inside a call; not service time
         self.extra: dict[str, Any] = {}
         self.stop_requested = False
+        # Set by the run loop: sends a heartbeat (stats) when one is due, so an actor blocked
+        # waiting on another one keeps saying it is alive and the supervisor blames the right one.
+        self.heartbeat = lambda: None
 
     def send(self, target: str, msg: Any, block: bool = True) -> bool:
         """Send to a downstream actor. ``block=False`` gives up (returns False)
@@ -81,6 +85,8 @@ class ActorContext:
         sock = self._out.get(target)
         if sock is None:
             raise CanopyError(f"actor {self.name!r} has no output named {target!r}")
+        if getattr(msg, "sent_at", None) == 0.0:
+            msg.sent_at = time.time()  # the receiver's queue wait starts now (issue 11: keyframes had none)
         try:
             sock.send(encode(msg), 0 if block else zmq.NOBLOCK)
         except zmq.Again:
@@ -99,9 +105,14 @@ class ActorContext:
         The wait is booked as blocked time, not as this actor's service time."""
         t0 = time.perf_counter()
         try:
-            if self.inbox.poll(timeout_ms):
-                return decode(self.inbox.recv())
-            return None
+            deadline = t0 + timeout_ms / 1e3
+            while True:
+                left_ms = max(0, int((deadline - time.perf_counter()) * 1e3))
+                if self.inbox.poll(min(left_ms, int(STATS_PERIOD_S * 1e3))):
+                    return decode(self.inbox.recv())
+                self.heartbeat()
+                if left_ms == 0 or time.perf_counter() >= deadline:
+                    return None
         finally:
             self.blocked_s += time.perf_counter() - t0
 
@@ -195,6 +206,8 @@ def actor_main(spec: ActorSpec) -> None:
     """Entry point of an actor process."""
     # Ctrl-C reaches the whole process group; only the supervisor decides.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # The launcher opened the dataset first and already printed its input warnings once.
+    warnings.simplefilter("ignore", InputWarning)
     parent = os.getppid()
     zctx = zmq.Context()
     ctx = None
@@ -208,6 +221,12 @@ def actor_main(spec: ActorSpec) -> None:
         actor.setup(ctx)
         ctx.publish(ActorReady(actor=spec.name, pid=os.getpid()))
         meter = _Meter()
+
+        def heartbeat() -> None:
+            if time.monotonic() - meter.last >= STATS_PERIOD_S:
+                ctx.publish(meter.stats(spec.name, ctx))
+
+        ctx.heartbeat = heartbeat
         poller = zmq.Poller()
         poller.register(ctx.control, zmq.POLLIN)
         poller.register(ctx.inbox, zmq.POLLIN)
@@ -250,15 +269,23 @@ def actor_main(spec: ActorSpec) -> None:
         ctx.publish(meter.stats(spec.name, ctx, final=True))
     except CanopyError as exc:
         exit_code = 1
-        _report(ctx, spec.name, str(exc), traceback.format_exc(), current_index)
+        _report(ctx, spec.name, str(exc), traceback.format_exc(), _failed_index(actor, current_index))
     except Exception as exc:  # an actor must report, never die silently
         exit_code = 1
-        _report(ctx, spec.name, f"{type(exc).__name__}: {exc}", traceback.format_exc(), current_index)
+        _report(ctx, spec.name, f"{type(exc).__name__}: {exc}", traceback.format_exc(),
+                _failed_index(actor, current_index))
     finally:
         if ctx is not None:
             ctx.close()
         zctx.term()
     sys.exit(exit_code)
+
+
+def _failed_index(actor, last_message_index: int) -> int:
+    """The frame being worked on: an actor that knows it (the source, reading frame i on a tick)
+    says so in ``current_index``; else the index of the last message received."""
+    index = getattr(actor, "current_index", None)
+    return int(index) if isinstance(index, int) and index >= 0 else last_message_index
 
 
 def _report(ctx: ActorContext | None, name: str, error: str, detail: str, index: int) -> None:

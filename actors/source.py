@@ -67,6 +67,7 @@ class SourceActor(Actor):
             ctx.stop()
             return None
         i = self.next_index
+        self.current_index = i  # a failure while reading names this frame, not the last acknowledged one
         self.next_index += 1
         if not self.lockstep and time.monotonic() - self._release_time(i) > self.period:
             ctx.dropped += 1  # too late to be useful: a live camera would have overwritten it

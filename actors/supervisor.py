@@ -23,14 +23,55 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
+from pathlib import Path
+
 import msgpack
+import psutil
 import zmq
 
 from actors.runtime import ActorSpec, actor_main
 from protocol.codec import decode, encode
 from protocol.messages import ActorError, ActorReady, ActorStats, Shutdown, Start
-from shared.errors import ProtocolError
+from shared.errors import ConfigError, ProtocolError
 from shared.ring import FrameRing, remove_segment
+
+RUN_DIR_PREFIX = "canopy-"
+OWNER_FILE = "owner"          # "<pid> <process create time>" of the launcher that made the folder
+SHM_PREFIX = "canopy_"        # ring names are canopy_<launcher pid>_<ms>_<raw|enh>
+
+
+def _owner_alive(pid: int, create_time: float | None) -> bool:
+    try:
+        proc = psutil.Process(pid)
+        # A recycled pid belongs to another process: compare the start time too.
+        return create_time is None or abs(proc.create_time() - create_time) < 1.0
+    except psutil.Error:
+        return False
+
+
+def sweep_stale_runs(tmp_dir: str | None = None, shm_dir: str = "/dev/shm") -> list[str]:
+    """Remove socket folders and shared-memory rings left by launchers that died without
+    cleaning up (SIGKILL). Only folders with an owner file and rings named after a pid are
+    touched, and only when that process is gone. Returns what was removed."""
+    removed = []
+    root = Path(tmp_dir or tempfile.gettempdir())
+    for folder in root.glob(f"{RUN_DIR_PREFIX}*"):
+        try:
+            pid, ctime = folder.joinpath(OWNER_FILE).read_text().split()
+            alive = _owner_alive(int(pid), float(ctime))
+        except (OSError, ValueError):
+            continue  # not ours, or being created right now
+        if not alive:
+            shutil.rmtree(folder, ignore_errors=True)
+            removed.append(str(folder))
+    if os.path.isdir(shm_dir):
+        for name in os.listdir(shm_dir):
+            parts = name.split("_")
+            if name.startswith(SHM_PREFIX) and len(parts) >= 3 and parts[1].isdigit() \
+                    and not _owner_alive(int(parts[1]), None):
+                if remove_segment(name):
+                    removed.append(f"{shm_dir}/{name}")
+    return removed
 
 
 @dataclass
@@ -89,8 +130,14 @@ class Supervisor:
     # -- wiring helpers -----------------------------------------------------------------
     @staticmethod
     def make_run_dir() -> str:
+        """A fresh socket folder, tagged with its owner so a later run can sweep it if the
+        owner died without cleaning up (SIGKILL of the launcher)."""
+        sweep_stale_runs()
         # Short path: ipc:// endpoints must fit in a sockaddr_un (~107 bytes).
-        return tempfile.mkdtemp(prefix="canopy-")
+        run_dir = tempfile.mkdtemp(prefix=RUN_DIR_PREFIX)
+        me = psutil.Process()
+        Path(run_dir, OWNER_FILE).write_text(f"{me.pid} {me.create_time():.3f}\n")
+        return run_dir
 
     @staticmethod
     def endpoints(run_dir: str, name: str) -> tuple[str, str]:
@@ -115,7 +162,10 @@ class Supervisor:
             if self.inspect_endpoint:
                 inspect = zctx.socket(zmq.PUB)
                 inspect.setsockopt(zmq.SNDHWM, 1000)
-                inspect.bind(self.inspect_endpoint)
+                try:
+                    inspect.bind(self.inspect_endpoint)
+                except zmq.ZMQError as exc:
+                    raise ConfigError("--inspect", f"cannot listen on {self.inspect_endpoint!r}: {exc}") from None
             for rs in self.ring_specs:
                 remove_segment(rs.name)  # a stale segment from a crashed run of the same name
                 self.rings.append(FrameRing.create(rs.name, rs.n_slots, rs.height, rs.width, rs.n_images))
@@ -201,11 +251,32 @@ class Supervisor:
                 return dead
             if all(not p.is_alive() for p in self.procs.values()):
                 return RunOutcome(True, "completed")
-            now = time.monotonic()
-            for name, seen in self.last_seen.items():
-                if name not in self.finished and now - seen > self.heartbeat_timeout_s:
-                    return RunOutcome(False, f"actor '{name}' sent no heartbeat for {now - seen:.1f} s "
-                                             f"(hung?)", name)
+            silent = self._silent_actors()
+            if silent:
+                return self._blame(silent)
+
+    def _silent_actors(self) -> dict[str, float]:
+        """Actors whose last heartbeat is older than the timeout: {name: seconds silent}."""
+        now = time.monotonic()
+        return {name: now - seen for name, seen in self.last_seen.items()
+                if name not in self.finished and now - seen > self.heartbeat_timeout_s}
+
+    def _blame(self, silent: dict[str, float]) -> RunOutcome:
+        """Name the actor that hangs. An actor blocked waiting on another one keeps sending
+        heartbeats (ActorContext.recv_inbox), but several may still fall silent together: a
+        stopped process (SIGSTOP, a debugger) is the culprit, else the one silent longest."""
+        for name in silent:
+            proc = self.procs.get(name)
+            try:
+                stopped = proc is not None and psutil.Process(proc.pid).status() in (
+                    psutil.STATUS_STOPPED, psutil.STATUS_TRACING_STOP)
+            except psutil.Error:
+                stopped = False
+            if stopped:
+                return RunOutcome(False, f"actor '{name}' is frozen (process stopped, e.g. by SIGSTOP): "
+                                         f"no heartbeat for {silent[name]:.1f} s", name)
+        name = max(silent, key=silent.get)
+        return RunOutcome(False, f"actor '{name}' sent no heartbeat for {silent[name]:.1f} s (hung?)", name)
 
     def _dead_actor(self) -> RunOutcome | None:
         for name, proc in self.procs.items():

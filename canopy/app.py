@@ -109,9 +109,11 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
         dataset_kind = "euroc"
     else:
         dataset_kind = dataset
+    if inspect is not None:
+        check_endpoint(inspect)
     source = open_source(dataset_kind, path, max_frames=max_frames)  # validates the dataset before any process starts
     calib = source.calibration
-    out_dir = Path(out) if out else default_out_dir(dataset)
+    out_dir = prepare_out_dir(Path(out) if out else default_out_dir(dataset))
     record_path = None
     if record is not None:  # "" = the default name in the results folder
         from canopy.recording import check_output_path
@@ -121,7 +123,9 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
     rings = {"raw": f"{tag}_raw", "enhanced": f"{tag}_enh"}
     specs = build_actor_specs(run_dir, cfg, dataset_kind, path, max_frames, rings, calib, source.rate_hz,
                               record=record_path)
-    collector = RunCollector(n_frames=len(source), progress=progress)
+    # trajectory.tum and frames.csv grow as frames complete: a killed launcher still leaves them.
+    collector = RunCollector(n_frames=len(source), progress=progress, out_dir=out_dir,
+                             frame_stamps=source.timestamps)
     supervisor = Supervisor(
         specs, [RingSpec(rings["raw"], cfg.runtime.ring_slots, calib.height, calib.width),
                 RingSpec(rings["enhanced"], cfg.runtime.ring_slots, calib.height, calib.width)],
@@ -130,13 +134,19 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
         inspect_endpoint=inspect, run_dir=run_dir)
     outcome = supervisor.run()
     collector.finish_progress()
+    repaired = None
+    if record_path and Path(record_path).is_file():
+        from canopy.recording import repair_recording
+        repaired = repair_recording(record_path)  # the recorder may have died before writing its summary
     run_info = {"dataset": dataset, "preset": preset if dataset == "synthetic" else None,
                 "path": str(source.root) if hasattr(source, "root") else path,
                 "source": source.name, "clock": cfg.runtime.clock,
                 "enhancement": getattr(cfg.enhancement, "method", "none"), "config_file": cfg.source_file,
                 "lines": bool(cfg.tracking.use_lines), "recording": record_path,
+                "recording_repaired_messages": repaired,
                 "outcome": outcome.reason, "ok": outcome.ok, "wall_s": outcome.wall_s,
                 "frames_per_s": len(collector.poses) / outcome.wall_s if outcome.wall_s else None,
+                "failed_actor": outcome.failed_actor,
                 "cpu_count": os.cpu_count(), "calibration": calib.to_dict(),
                 "errors": [{"actor": e.actor, "error": e.error, "frame": e.frame_index} for e in collector.errors]}
     summary = collector.write_outputs(out_dir, source.ground_truth, run_info)
@@ -145,6 +155,63 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
     _write_config(out_dir, cfg)
     text = format_summary(summary, outcome.reason, os.cpu_count() or 1)
     return RunResult(outcome=outcome, summary=summary, out_dir=out_dir, text=text)
+
+
+def prepare_out_dir(out_dir: Path) -> Path:
+    """Create the results folder before any process starts and prove it is writable, so a bad
+    ``--out`` fails in a second with one line instead of after the whole run."""
+    from shared.errors import ConfigError
+
+    where = f"--out {out_dir}"
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ConfigError(where, "is a file, not a folder")
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        raise ConfigError(where, "cannot create the folder: a parent is a file") from None
+    except OSError as exc:
+        raise ConfigError(where, f"cannot create the folder: {exc.strerror or exc}") from None
+    probe = out_dir / f".canopy-write-test-{os.getpid()}"
+    try:
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        raise ConfigError(where, f"folder is not writable: {exc.strerror or exc}") from None
+    return out_dir
+
+
+def check_endpoint(endpoint: str) -> str:
+    """Validate an ``--inspect`` endpoint before any process starts: syntax, host, and that it
+    can be bound now (a port in use fails here with one line)."""
+    import re
+    import socket
+
+    import zmq
+
+    from shared.errors import ConfigError
+
+    where = f"--inspect {endpoint}"
+    m = re.fullmatch(r"(tcp|ipc)://(.+)", endpoint or "")
+    if m is None:
+        raise ConfigError(where, "expected tcp://HOST:PORT or ipc://PATH")
+    if m.group(1) == "tcp":
+        host, sep, port = m.group(2).rpartition(":")
+        if not sep or not host or not (port.isdigit() and 1 <= int(port) <= 65535):
+            raise ConfigError(where, "expected tcp://HOST:PORT with a port number 1..65535")
+        if host not in ("*", "0.0.0.0"):
+            try:
+                socket.getaddrinfo(host.strip("[]"), None)
+            except (socket.gaierror, UnicodeError):
+                raise ConfigError(where, f"unknown host {host!r}") from None
+    zctx = zmq.Context.instance()
+    probe = zctx.socket(zmq.PUB)
+    try:
+        probe.bind(endpoint)
+    except zmq.ZMQError as exc:
+        raise ConfigError(where, f"cannot listen there: {exc}") from None
+    finally:
+        probe.close(linger=0)
+    return endpoint
 
 
 def _write_config(out_dir: Path, cfg) -> None:

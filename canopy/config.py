@@ -16,6 +16,10 @@ from shared.params import load_yaml, params_from_mapping
 REPO_ROOT = Path(__file__).resolve().parents[1]
 CONFIG_DIR = REPO_ROOT / "configs"
 CLOCK_MODES = ("lockstep", "realtime")
+MIN_RING_SLOTS, MAX_RING_SLOTS = 2, 256
+# Actors send a heartbeat every second (actors.runtime.STATS_PERIOD_S); a timeout shorter than
+# two periods would call a healthy actor hung on one late message.
+MIN_HEARTBEAT_TIMEOUT_S = 2.0
 
 
 @dataclass(frozen=True)
@@ -34,12 +38,20 @@ class RuntimeParams:
     def validate(self) -> None:
         if self.clock not in CLOCK_MODES:
             raise ConfigError("runtime.clock", f"must be one of {CLOCK_MODES}, got {self.clock!r}")
-        if self.ring_slots < 2:
-            raise ConfigError("runtime.ring_slots", "needs at least 2 slots")
-        if self.max_lag_frames <= 0:
-            raise ConfigError("runtime.max_lag_frames", "must be > 0")
-        if self.realtime_speed <= 0:
-            raise ConfigError("runtime.realtime_speed", "must be > 0")
+        if not MIN_RING_SLOTS <= self.ring_slots <= MAX_RING_SLOTS:
+            raise ConfigError("runtime.ring_slots", f"must be {MIN_RING_SLOTS}..{MAX_RING_SLOTS}, got {self.ring_slots}")
+        # `not x > 0` also rejects NaN.
+        for name in ("max_lag_frames", "realtime_speed", "ready_timeout_s", "lockstep_wait_s",
+                     "map_snapshot_period_s"):
+            value = getattr(self, name)
+            if not value > 0 or value == float("inf"):
+                raise ConfigError(f"runtime.{name}", f"must be a finite number > 0, got {value}")
+        if not MIN_HEARTBEAT_TIMEOUT_S <= self.heartbeat_timeout_s < float("inf"):
+            raise ConfigError("runtime.heartbeat_timeout_s",
+                              f"must be at least {MIN_HEARTBEAT_TIMEOUT_S:g} s (actors send a heartbeat every "
+                              f"second), got {self.heartbeat_timeout_s}")
+        if not 0 <= self.grace_s < float("inf"):
+            raise ConfigError("runtime.grace_s", f"must be a finite number >= 0, got {self.grace_s}")
 
 
 @dataclass(frozen=True)
@@ -67,6 +79,11 @@ def load_run_config(dataset: str, config_path: str | Path | None = None) -> RunC
     if unknown:
         raise ConfigError(path, f"unknown section(s) {unknown}; expected {sorted(known)}")
     src = str(path)
+    for name in known:
+        section = raw.get(name)
+        if section is not None and not isinstance(section, dict):
+            raise ConfigError(path, f"section '{name}' must be a mapping of parameter: value, "
+                                    f"got a {type(section).__name__}")
     return RunConfig(
         runtime=params_from_mapping(RuntimeParams, raw.get("runtime"), src),
         enhancement=params_from_mapping(EnhanceParams, raw.get("enhancement"), src),

@@ -429,3 +429,55 @@ def read_messages(path: str | Path, topics: list[str] | None = None) -> Iterator
             except Exception:  # noqa: BLE001 - McapError, struct.error, zstd errors...
                 return  # the cut-off tail of a recording whose writer was killed
             yield channel.topic, schema.name if schema else "", message.log_time, json.loads(message.data)
+
+
+def recording_is_finished(path: str | Path) -> bool:
+    """True when mcap's seeking reader opens the file and finds its summary section."""
+    from mcap.reader import make_reader
+
+    try:
+        with open(path, "rb") as f:
+            return make_reader(f).get_summary() is not None
+    except Exception:  # noqa: BLE001 - McapError, RecordLengthLimitExceeded, struct.error, ...
+        return False
+
+
+def repair_recording(path: str | Path) -> int | None:
+    """Finish a recording whose writer died (no summary, maybe a cut-off last record).
+
+    The readable messages are copied, in file order, into a new file with a summary section that
+    replaces the broken one atomically. Returns the number of messages kept, or None when the
+    file was already finished (left untouched).
+    """
+    import os
+
+    p = Path(path)
+    if recording_is_finished(p):
+        return None
+    tmp = p.with_name(p.name + ".repair")
+    kept = 0
+    with open(p, "rb") as src, open(tmp, "wb") as dst:
+        writer = Writer(dst, compression=CompressionType.ZSTD)
+        writer.start(profile="", library=LIBRARY)
+        schema_ids: dict[int, int] = {}
+        channel_ids: dict[int, int] = {}
+        it = NonSeekingReader(src).iter_messages(log_time_order=False)
+        while True:
+            try:
+                schema, channel, message = next(it)
+            except StopIteration:
+                break
+            except Exception:  # noqa: BLE001 - the cut-off tail: keep everything before it
+                break
+            if schema is not None and schema.id not in schema_ids:
+                schema_ids[schema.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
+            if channel.id not in channel_ids:
+                channel_ids[channel.id] = writer.register_channel(
+                    channel.topic, channel.message_encoding, schema_ids.get(channel.schema_id, 0),
+                    metadata=dict(channel.metadata))
+            writer.add_message(channel_ids[channel.id], log_time=message.log_time, data=message.data,
+                               publish_time=message.publish_time, sequence=message.sequence)
+            kept += 1
+        writer.finish()
+    os.replace(tmp, p)
+    return kept

@@ -112,6 +112,9 @@ class FramePose:
     enhancement: dict = field(default_factory=dict)  # method used, image statistics before/after
     n_lines: int = 0            # left segments detected (0 without --lines)
     n_line_inliers: int = 0     # line matches kept by the pose refinement
+    # Why a frame has no estimated pose (status "lost"), e.g. "too few inliers"; "" when tracked.
+    # T_world_cam of such a frame is a placeholder and never written to a trajectory.
+    reason: str = ""
 
 
 @message("map_snapshot")
@@ -164,6 +167,7 @@ class KeyframeData:
     line_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))                    # (K,) -1: none
     new_line_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))                # (K,) -1: none
     line_endpoints_cam: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))            # (K,2,3) NaN: none
+    sent_at: float = 0.0         # wall time sent (filled in by ActorContext.send): local mapping's queue wait
 
     def __len__(self) -> int:
         return len(self.uv)

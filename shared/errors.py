@@ -26,3 +26,16 @@ class ConfigError(InputError):
 
 class ProtocolError(CanopyError):
     """A malformed or incompatible message on the bus."""
+
+
+class InputWarning(UserWarning):
+    """Input that is used, but not as given (converted images, unmatched files).
+
+    The launcher prints it as one ``warning:`` line naming the input.
+    """
+
+
+def warn_input(source: str | Path, problem: str) -> None:
+    import warnings
+
+    warnings.warn(InputWarning(f"{source}: {problem}"), stacklevel=2)

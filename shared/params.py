@@ -51,6 +51,9 @@ def _coerce(value: Any, annotation: Any, where: str) -> Any:
 
 def params_from_mapping(cls: type[P], mapping: Mapping[str, Any] | None, source: str = "<config>") -> P:
     """Build the dataclass ``cls`` from ``mapping``; missing keys keep defaults."""
+    if mapping is not None and not isinstance(mapping, Mapping):
+        raise ConfigError(source, f"{cls.__name__} parameters must be a mapping of name: value, "
+                                  f"got a {type(mapping).__name__}")
     mapping = dict(mapping or {})
     hints = typing.get_type_hints(cls)
     names = {f.name for f in dataclasses.fields(cls)}

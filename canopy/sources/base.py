@@ -14,10 +14,13 @@ import cv2
 import numpy as np
 import yaml
 
-from shared.errors import InputError
+from shared.errors import InputError, warn_input
 from shared.types import StereoCalibration, StereoFrame, Trajectory
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".pgm", ".ppm", ".bmp", ".tif", ".tiff")
+# Smallest usable image side: ORB needs a 31 px border on the finest pyramid level plus room to
+# find corners; anything smaller cannot be tracked and would fail deep inside OpenCV.
+MIN_IMAGE_SIDE_PX = 64
 
 # A rectifier turns a raw (left, right) pair into the rectified pair; the
 # identity for datasets that ship rectified images (KITTI, plain folders).
@@ -67,6 +70,25 @@ class StereoSource:
             raise InputError(self.root, "no stereo frames found")
         if len(self.timestamps) > 1 and not np.all(np.diff(self.timestamps) > 0):
             raise InputError(self.root, "frame timestamps are not strictly increasing")
+        w, h = self.image_size
+        if min(w, h) < MIN_IMAGE_SIDE_PX:
+            raise InputError(self.left_paths[0], f"images are {w}x{h}; at least {MIN_IMAGE_SIDE_PX}x"
+                                                 f"{MIN_IMAGE_SIDE_PX} pixels are needed to track features")
+        self._probe_first_pair()
+
+    def _probe_first_pair(self) -> None:
+        """Read the first pair as stored, before any process starts: a corrupt first image fails
+        here, and images that will be converted (colour, 16-bit) are announced once."""
+        for path in (self.left_paths[0], self.right_paths[0]):
+            raw = read_image_as_stored(path)
+            notes = []
+            if raw.ndim == 3 and raw.shape[2] > 1:
+                notes.append(f"{raw.shape[2]}-channel colour converted to grey")
+            if raw.dtype != np.uint8:
+                notes.append(f"{raw.dtype} pixels scaled to 8 bit (value / 256 for 16-bit)")
+            if notes:
+                warn_input(path.parent, f"images are used converted: {'; '.join(notes)} "
+                                        f"(first: {path.name})")
 
     # -- sequence protocol -------------------------------------------------
     def __len__(self) -> int:
@@ -133,6 +155,17 @@ def read_grey(path: Path) -> np.ndarray:
     return img
 
 
+def read_image_as_stored(path: Path) -> np.ndarray:
+    """Read an image without any conversion (channels and bit depth as stored)."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "image file not found")
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None or img.size == 0:
+        raise InputError(path, "cannot decode image (corrupt or unsupported format)")
+    return img
+
+
 def require_dir(path: Path, what: str) -> Path:
     if not path.is_dir():
         raise InputError(path, f"{what} folder not found")
@@ -178,9 +211,16 @@ def numbers(value, count: int | None, path: Path, field: str) -> np.ndarray:
         raise InputError(path, f"field '{field}' is not numeric: {value!r}") from None
     if count is not None and arr.size != count:
         raise InputError(path, f"field '{field}' needs {count} numbers, got {arr.size}")
-    if not np.all(np.isfinite(arr)):
-        raise InputError(path, f"field '{field}' contains non-finite values")
+    check_finite(arr, path, field)
     return arr
+
+
+def check_finite(arr: np.ndarray, path: Path, field: str) -> None:
+    """InputError naming the first non-finite number of ``arr`` (1-based, as a user counts)."""
+    bad = np.nonzero(~np.isfinite(arr))[0]
+    if len(bad):
+        raise InputError(path, f"field '{field}': number {bad[0] + 1} of {arr.size} is not finite "
+                               f"({arr[bad[0]]}){f'; {len(bad)} are not' if len(bad) > 1 else ''}")
 
 
 def number(mapping: dict, key: str, path: Path, default: float | None = None, positive: bool = False) -> float:
@@ -270,3 +310,11 @@ def rate_from_stamps(stamps: np.ndarray, fallback: float) -> float:
         return float(fallback)
     dt = float(np.median(np.diff(stamps)))
     return 1.0 / dt if dt > 0 else float(fallback)
+
+
+def warn_unmatched(left_dir: Path, right_dir: Path, left_only: Sequence[str], right_only: Sequence[str]) -> None:
+    """Images without a twin on the other side are skipped, with one warning per side."""
+    for folder, names, other in ((left_dir, left_only, right_dir), (right_dir, right_only, left_dir)):
+        if len(names):
+            warn_input(folder, f"{len(names)} image(s) have no twin in {other.name}/ and are skipped "
+                               f"(first: {names[0]})")

@@ -10,7 +10,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from shared.errors import InputError
+from shared.errors import InputError, warn_input
 from shared.geometry import poses_from_xyz_quat_wxyz
 from shared.types import StereoCalibration, Trajectory
 
@@ -128,17 +128,29 @@ class EurocSource(StereoSource):
             raise InputError(cam_dirs[1] / "sensor.yaml", "cam1 resolution differs from cam0")
         size = (c0.width, c0.height)
 
-        # Frames: stamps listed by both cameras whose PNGs exist on both sides
-        # (the micro set's cam1 list names 4 images that are not there).
+        # Frames: stamps listed by both cameras. A stamp only one camera lists has no stereo twin and
+        # is skipped with a warning (the bundled micro set's cam1 list names 4 such stamps); an image
+        # that a stereo stamp needs but that is not on disk is an error naming the file.
         lists = [_read_image_list(d / "data.csv") for d in cam_dirs]
-        common = np.intersect1d(np.fromiter(lists[0], np.int64), np.fromiter(lists[1], np.int64))
+        stamps = [np.fromiter(lst, np.int64, count=len(lst)) for lst in lists]
+        common = np.intersect1d(*stamps)
+        for k, (d, other) in enumerate(((cam_dirs[0], cam_dirs[1]), (cam_dirs[1], cam_dirs[0]))):
+            only = np.setdiff1d(stamps[k], common)
+            if len(only):
+                warn_input(d / "data.csv", f"{len(only)} stamp(s) have no image listed by {other.name} and are "
+                                           f"skipped (first: {int(only[0])})")
+        if not len(common):
+            raise InputError(mav0, "no stereo pairs: no timestamp is listed by both cam0 and cam1")
+        common = common[: truncate(max_frames, len(common), path)]
         pairs = [
             (s, cam_dirs[0] / "data" / lists[0][s], cam_dirs[1] / "data" / lists[1][s])
             for s in common.tolist()
         ]
-        pairs = [p for p in pairs if p[1].is_file() and p[2].is_file()]
-        if not pairs:
-            raise InputError(mav0, "no stereo pairs: no timestamp has an image in both cam0/data and cam1/data")
+        for s, *files in pairs:
+            for f in files:
+                if not f.is_file():
+                    raise InputError(f, f"image listed in {f.parent.parent.name}/data.csv (stamp {s}) "
+                                        f"is not on disk")
         pairs = pairs[: truncate(max_frames, len(pairs), path)]
         stamps_ns = np.array([p[0] for p in pairs], dtype=np.int64)
 

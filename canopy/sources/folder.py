@@ -27,6 +27,7 @@ from .base import (
     require_dir,
     require_file,
     truncate,
+    warn_unmatched,
 )
 
 DEFAULT_RATE_HZ = 20.0
@@ -54,21 +55,24 @@ class FolderSource(StereoSource):
         if not left:
             raise InputError(left_dir, "no images (png/jpg/...) found")
         right_by_name = {p.name: p for p in _images(right_dir)}
-        missing = [p.name for p in left if p.name not in right_by_name]
-        if missing:
-            raise InputError(right_dir / missing[0], f"right image missing ({len(missing)} left images have no right twin)")
-        extra = sorted(set(right_by_name) - {p.name for p in left})
-        if extra:
-            raise InputError(right_dir / extra[0], f"no matching left image ({len(extra)} right images have no left twin)")
+        left_names = {p.name for p in left}
+        warn_unmatched(left_dir, right_dir, [p.name for p in left if p.name not in right_by_name],
+                       sorted(set(right_by_name) - left_names))
+        # times.txt, when given, has one stamp per left image: keep the stamps of paired images only.
+        paired = np.array([p.name in right_by_name for p in left], dtype=bool)
+        left_all = left
+        left = [p for p in left if p.name in right_by_name]
+        if not left:
+            raise InputError(left_dir, f"no stereo pairs: no image has a twin of the same name in {right_dir.name}/")
         n_all = len(left)
         n = truncate(max_frames, n_all, path)
 
         times_path = path / "times.txt"
         if times_path.is_file():
             times = read_number_table(times_path, 1, "timestamps")[:, 0]
-            if len(times) != n_all:
-                raise InputError(times_path, f"has {len(times)} stamps for {n_all} image pairs")
-            stamps = times[:n]
+            if len(times) != len(left_all):
+                raise InputError(times_path, f"has {len(times)} stamps for {len(left_all)} left images")
+            stamps = times[paired][:n]
         else:
             stamps = np.arange(n, dtype=np.float64) / rate
 

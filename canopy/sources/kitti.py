@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from shared.errors import InputError
+from shared.errors import InputError, warn_input
 from shared.types import StereoCalibration, Trajectory
 
 from .base import (
@@ -24,6 +24,7 @@ from .base import (
     require_dir,
     require_file,
     truncate,
+    warn_unmatched,
 )
 
 IMAGE_DIR_PAIRS = (("image_0", "image_1"), ("image_l", "image_r"))
@@ -51,7 +52,10 @@ def parse_kitti_calib(path: Path) -> dict[str, np.ndarray]:
             bare += 1
         try:
             vals = np.array([float(t) for t in body.split()], dtype=np.float64)
-            problem = None if vals.size == 12 and np.all(np.isfinite(vals)) else f"needs 12 finite numbers, got {vals.size}"
+            problem = None if vals.size == 12 else f"needs 12 numbers, got {vals.size}"
+            bad = np.nonzero(~np.isfinite(vals))[0]
+            if problem is None and len(bad):
+                problem = f"number {bad[0] + 1} of 12 is not finite ({vals[bad[0]]})"
         except ValueError:
             problem = "is not numeric"
         if problem is None:
@@ -112,6 +116,8 @@ class KittiSource(StereoSource):
         indices = sorted(set(left) & set(right))
         if not indices:
             raise InputError(left_dir, "no stereo pairs (numbered images present in both folders)")
+        warn_unmatched(left_dir, right_dir, [left[i].name for i in sorted(set(left) - set(right))],
+                       [right[i].name for i in sorted(set(right) - set(left))])
         indices = indices[: truncate(max_frames, len(indices), path)]
         idx = np.asarray(indices, dtype=np.int64)
         if idx[-1] >= len(times):
