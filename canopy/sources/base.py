@@ -89,6 +89,7 @@ class StereoSource:
             if notes:
                 warn_input(path.parent, f"images are used converted: {'; '.join(notes)} "
                                         f"(first: {path.name})")
+        self.raw_pair(0)  # sizes of the pair against each other and the calibration
 
     # -- sequence protocol -------------------------------------------------
     def __len__(self) -> int:
