@@ -134,9 +134,17 @@ def write_json(path, obj, indent: int = 2) -> Path:
 
 # --------------------------------------------------------------------------- plot
 
-def _largest_axes(positions: np.ndarray) -> tuple[int, int]:
-    extent = np.ptp(positions, axis=0) if len(positions) else np.zeros(3)
-    a, b = sorted(np.argsort(-extent, kind="stable")[:2].tolist())
+def top_view_axes(poses: np.ndarray) -> tuple[int, int]:
+    """The two world axes of a view from above. A camera's y axis points down (OpenCV
+    convention), so the world axis closest to the cameras' mean y direction is the vertical and
+    the other two span the ground plane: x-z for KITTI and for any run's own first-camera frame,
+    x-y for EuRoC's gravity-aligned (z up) ground truth."""
+    poses = np.asarray(poses).reshape(-1, 4, 4)
+    if not len(poses):
+        return 0, 2
+    down = poses[:, :3, 1].mean(axis=0)
+    vertical = int(np.argmax(np.abs(down)))
+    a, b = [k for k in range(3) if k != vertical]
     return a, b
 
 
@@ -145,9 +153,9 @@ def plot_trajectory_png(path, est: Trajectory, gt: Trajectory | None = None, tit
     """Top view and x/y/z against time of ``est`` (and ``gt``).
 
     With ``gt``, ``est`` is SE(3)-aligned to it on the stamps matched within
-    ``max_diff`` s and the title carries the ATE RMSE. The top view uses the
-    two axes with the largest extent (of gt when given, else est): for camera
-    frames (y down) that is usually x-z. Headless (Agg backend).
+    ``max_diff`` s and the title carries the ATE RMSE. The top view looks along
+    the vertical (``top_view_axes``, of gt when given, else est): x-z for camera
+    frames (y down). Headless (Agg backend).
     """
     import matplotlib
 
@@ -169,8 +177,7 @@ def plot_trajectory_png(path, est: Trajectory, gt: Trajectory | None = None, tit
             label_est = "estimate (SE(3) aligned)"
         else:
             ate_text = f"ATE: no stamps matched within {max_diff} s"
-    ref_pos = gt.positions if gt is not None else est_pos
-    a, b = _largest_axes(ref_pos if len(ref_pos) else est_pos)
+    a, b = top_view_axes(gt.poses if gt is not None and len(gt) else est.poses)
     names = "xyz"
 
     fig = plt.figure(figsize=PLOT_SIZE_IN, dpi=PLOT_DPI)

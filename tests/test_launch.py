@@ -2,9 +2,13 @@
 
 These start real actor processes on the bundled data. The kill test watches
 the run over the inspection endpoint (as a remote user would), SIGKILLs one
-actor mid-run, and checks the promises: the run ends within 2 s with a
+actor mid-run, and checks the promises: the run ends by itself with a
 message naming the actor, the trajectory so far is on disk, and no
 shared-memory segment is left behind.
+
+Robust on a loaded machine (issue 11): kills wait for progress events, never
+for wall-clock time; counts compare with what the events showed (realtime
+drops frames when the machine is busy); time bounds are generous and say why.
 """
 import json
 import os
@@ -21,6 +25,11 @@ from actors.supervisor import inspection_client
 from protocol.messages import ActorReady, FramePose
 
 ROOT = Path(__file__).resolve().parents[1]
+# The supervisor gives actors grace_s (1 s) to stop, then kills them; on 2 cores shared with
+# other jobs, writing the outputs and the interpreter's exit can add several seconds more. A run
+# that does not end by itself hangs for minutes (heartbeat / lockstep waits), so 30 s separates
+# the two without flaking; the shutdown latency itself is a benchmark figure, not a test.
+RUN_ENDS_WITHIN_S = 30.0
 
 
 def _shm_segments() -> set[str]:
@@ -48,6 +57,8 @@ def test_euroc_default_run_writes_every_output(tmp_path):
     assert {"source", "enhancement", "tracking", "local_mapping"} <= set(stats)
     assert stats["tracking"]["messages"] >= 95 and stats["tracking"]["service_ms"]["p50"] > 0
     assert stats["tracking"]["peak_rss_mb"] > 10
+    # keyframes carry sent_at, so local mapping's queue wait is measured for each of them
+    assert stats["local_mapping"]["queue_ms"]["p50"] is not None
     traj = np.loadtxt(out / "trajectory.tum")
     assert traj.shape == (95, 8)
     em = metrics["est_motion"]  # the MAV sits still: ~zero motion is the drift test
@@ -67,26 +78,28 @@ def test_sigkill_of_an_actor_ends_run_cleanly(tmp_path, victim):
                              "--out", str(out), "--inspect", endpoint, "--quiet"],
                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        pids, killed_at = {}, None
+        pids, killed_at, posed = {}, None, 0
         for msg in inspection_client(endpoint, ["ready", "pose"], timeout_s=120):
             if isinstance(msg, ActorReady):
                 pids[msg.actor] = msg.pid
-            elif isinstance(msg, FramePose) and msg.index >= 20:
-                os.kill(pids[victim], signal.SIGKILL)
-                killed_at = time.monotonic()
-                break
+            elif isinstance(msg, FramePose):
+                posed += msg.status in ("init", "ok")
+                if msg.index >= 20:
+                    os.kill(pids[victim], signal.SIGKILL)
+                    killed_at = time.monotonic()
+                    break
         assert killed_at is not None, "the run never reached frame 20"
-        stdout, stderr = proc.communicate(timeout=30)
+        stdout, stderr = proc.communicate(timeout=4 * RUN_ENDS_WITHIN_S)
         ended_after = time.monotonic() - killed_at
     finally:
         if proc.poll() is None:
             proc.kill()
     assert proc.returncode == 1
-    assert ended_after < 2.0 + 0.5, f"run took {ended_after:.1f} s to end"  # 0.5 s: interpreter exit
+    assert ended_after < RUN_ENDS_WITHIN_S, f"run took {ended_after:.1f} s to end"
     assert f"actor '{victim}' died (killed by SIGKILL)" in stderr
     assert "Traceback" not in stderr
     traj = np.loadtxt(out / "trajectory.tum")
-    assert len(traj) >= 20
+    assert len(traj) >= posed  # every pose the run announced before the kill is on disk
     assert (out / "metrics.json").is_file()
     assert _shm_segments() <= before, "shared memory leaked"
 
@@ -201,20 +214,22 @@ def test_user_interrupt_stops_cleanly_and_keeps_results(tmp_path, how):
                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True)
     try:
+        posed = 0
         for msg in inspection_client(endpoint, ["pose"], timeout_s=120):
+            posed += msg.status in ("init", "ok")
             if msg.index >= 15:
                 break
         if how == "ctrl-c":
             os.killpg(proc.pid, signal.SIGINT)
         else:
             proc.send_signal(signal.SIGTERM)
-        stdout, stderr = proc.communicate(timeout=30)
+        stdout, stderr = proc.communicate(timeout=4 * RUN_ENDS_WITHIN_S)
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
     assert proc.returncode == 1
     assert "interrupted by the user" in stderr and "Traceback" not in stderr
-    assert len(np.loadtxt(out / "trajectory.tum")) >= 15
+    assert len(np.loadtxt(out / "trajectory.tum")) >= posed
     assert _shm_segments() <= before
 
 
