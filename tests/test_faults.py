@@ -29,7 +29,16 @@ END_WITHIN_S = 60
 
 
 def _shm_segments() -> set[str]:
-    return {n for n in os.listdir("/dev/shm") if n.startswith("canopy_")}
+    """Canopy ring segments whose launcher is gone (names are canopy_<launcher pid>_...): other
+    runs on the same machine, alive meanwhile, are not this test's leaks."""
+    import psutil
+
+    out = set()
+    for n in os.listdir("/dev/shm"):
+        parts = n.split("_")
+        if n.startswith("canopy_") and not (len(parts) > 2 and parts[1].isdigit() and psutil.pid_exists(int(parts[1]))):
+            out.add(n)
+    return out
 
 
 def _start(tmp_path, *args):
