@@ -63,8 +63,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="track and bundle-adjust line segments (FLD + LBD) as well as ORB points "
                         "(default from the config: off)")
     p.add_argument("--inspect", default=None, metavar="ENDPOINT",
-                   help="publish every event on this ZeroMQ endpoint for remote clients, "
-                        "e.g. tcp://0.0.0.0:5560 (see tools/watch_run.py)")
+                   help="publish every event on this ZeroMQ endpoint for remote clients and answer "
+                        "requests on the next port, e.g. tcp://127.0.0.1:5560 (see tools/watch_run.py); "
+                        "a non-loopback address needs --inspect-keys")
+    p.add_argument("--inspect-keys", default=None, metavar="DIR",
+                   help="CURVE keys for --inspect (server key pair, allowed clients' public keys in "
+                        "DIR/authorized/), made by tools/make_inspect_keys.py")
     p.add_argument("--record", nargs="?", const="", default=None, metavar="PATH",
                    help="write an .mcap recording for Foxglove (poses, images, map points and lines); "
                         "without PATH: <out>/run.mcap")
@@ -86,7 +90,7 @@ def main(argv: list[str] | None = None) -> int:
         result = run_slam(args.dataset, path=args.path, config=args.config, out=args.out, clock=args.clock,
                           max_frames=args.max_frames, enhance=args.enhance, inspect=args.inspect,
                           progress=not args.quiet, preset=args.preset, seed=args.seed, lines=args.lines,
-                          record=args.record)
+                          record=args.record, inspect_keys=args.inspect_keys)
     except CanopyError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

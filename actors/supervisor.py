@@ -10,7 +10,9 @@ unlinked, the socket folder removed and the remaining actors stopped within
 the grace period, so what was computed so far can still be written out.
 
 Every event is also re-published on an optional inspection endpoint
-(ZeroMQ PUB, multipart ``[kind, payload]``) for remote clients.
+(multipart ``[kind, payload]``, framed by ``run_start`` / ``run_end``) with a
+request/reply channel beside it (status, config, stats, stop); see
+``actors.inspection`` for its safety rules.
 """
 from __future__ import annotations
 
@@ -29,10 +31,11 @@ import msgpack
 import psutil
 import zmq
 
+from actors.inspection import InspectionServer, ServerKeys, inspection_client  # noqa: F401 (re-export)
 from actors.runtime import ActorSpec, actor_main
 from protocol.codec import decode, encode
-from protocol.messages import ActorError, ActorReady, ActorStats, Shutdown, Start
-from shared.errors import ConfigError, ProtocolError
+from protocol.messages import ActorError, ActorReady, ActorStats, RunEnd, RunStart, Shutdown, Start
+from shared.errors import ProtocolError
 from shared.ring import FrameRing, remove_segment
 
 RUN_DIR_PREFIX = "canopy-"
@@ -112,7 +115,9 @@ class Supervisor:
     def __init__(self, actors: list[ActorSpec], rings: list[RingSpec], source: str,
                  on_event: Callable[[Any], None], heartbeat_timeout_s: float = 5.0,
                  ready_timeout_s: float = 60.0, grace_s: float = 1.0,
-                 inspect_endpoint: str | None = None, run_dir: str | None = None):
+                 inspect_endpoint: str | None = None, run_dir: str | None = None,
+                 inspect_keys: ServerKeys | None = None, run_start: RunStart | None = None,
+                 queries: dict[str, Callable[[], dict]] | None = None):
         self.specs = actors
         self.ring_specs = rings
         self.source = source
@@ -126,6 +131,12 @@ class Supervisor:
         self.rings: list[FrameRing] = []
         self.last_seen: dict[str, float] = {}
         self.finished: set[str] = set()
+        self.inspect_keys = inspect_keys
+        self.run_start = run_start
+        self.run_id = run_start.run_id if run_start is not None else ""
+        self.queries = dict(queries or {})
+        self.stop_requested: str | None = None
+        self._t_start = time.monotonic()
 
     # -- wiring helpers -----------------------------------------------------------------
     @staticmethod
@@ -145,7 +156,7 @@ class Supervisor:
 
     # -- main ------------------------------------------------------------------------------
     def run(self) -> RunOutcome:
-        t_start = time.monotonic()
+        t_start = self._t_start = time.monotonic()
         outcome = RunOutcome(ok=False)
         zctx = zmq.Context()
         events = zctx.socket(zmq.PULL)
@@ -160,12 +171,9 @@ class Supervisor:
         try:
             events.bind(self.specs[0].events)
             if self.inspect_endpoint:
-                inspect = zctx.socket(zmq.PUB)
-                inspect.setsockopt(zmq.SNDHWM, 1000)
-                try:
-                    inspect.bind(self.inspect_endpoint)
-                except zmq.ZMQError as exc:
-                    raise ConfigError("--inspect", f"cannot listen on {self.inspect_endpoint!r}: {exc}") from None
+                inspect = InspectionServer(zctx, self.inspect_endpoint, self.inspect_keys)
+                if self.run_start is not None:
+                    inspect.publish(RunStart.KIND, encode(self.run_start))
             for rs in self.ring_specs:
                 remove_segment(rs.name)  # a stale segment from a crashed run of the same name
                 self.rings.append(FrameRing.create(rs.name, rs.n_slots, rs.height, rs.width, rs.n_images))
@@ -189,7 +197,12 @@ class Supervisor:
                 self._kill_all()
             outcome.exit_codes = {n: p.exitcode for n, p in self.procs.items()}
             self._drain(events, inspect)
-            for sock in [events, *controls.values()] + ([inspect] if inspect is not None else []):
+            if inspect is not None:
+                inspect.publish(RunEnd.KIND, encode(RunEnd(run_id=self.run_id, ok=outcome.ok,
+                                                           reason=outcome.reason or "run finished",
+                                                           wall_s=time.monotonic() - t_start)))
+                inspect.close()  # lingers 0.5 s so run_end reaches connected clients
+            for sock in [events, *controls.values()]:
                 sock.close(linger=0)
             zctx.term()
             for ring in self.rings:
@@ -207,7 +220,7 @@ class Supervisor:
             self.on_event(ActorError(actor="supervisor", error=f"malformed event dropped: {exc}"))
             return None
         if inspect is not None:
-            inspect.send_multipart([msg.KIND.encode(), payload])
+            inspect.publish(msg.KIND, payload)
         self.on_event(msg)
         return msg
 
@@ -219,6 +232,10 @@ class Supervisor:
         ready: set[str] = set()
         deadline = time.monotonic() + self.ready_timeout_s
         while len(ready) < len(self.specs):
+            if inspect is not None:
+                inspect.serve(self._answer, self.run_id)
+            if self.stop_requested:
+                return RunOutcome(False, self.stop_requested, interrupted=True)
             if events.poll(100):
                 msg = self._dispatch(events.recv(), inspect)
                 if isinstance(msg, ActorReady):
@@ -234,6 +251,10 @@ class Supervisor:
                 return RunOutcome(False, f"actors not ready after {self.ready_timeout_s:.0f} s: {missing}")
         controls[self.source].send(encode(Start()))
         while True:
+            if inspect is not None:
+                inspect.serve(self._answer, self.run_id)
+            if self.stop_requested:
+                return RunOutcome(False, self.stop_requested, interrupted=True)
             if events.poll(100):
                 while True:
                     msg = self._dispatch(events.recv(), inspect)
@@ -254,6 +275,23 @@ class Supervisor:
             silent = self._silent_actors()
             if silent:
                 return self._blame(silent)
+
+    def _answer(self, command: str) -> tuple[dict, str | None]:
+        """A remote client's request (actors.inspection.COMMANDS)."""
+        if command == "stop":
+            self.stop_requested = "stopped by a remote client"
+            return {"stopping": True}, None
+        if command == "status":
+            base = {"run_id": self.run_id, "uptime_s": time.monotonic() - self._t_start,
+                    "actors": {n: ("finished" if n in self.finished else
+                                   "alive" if p.is_alive() else _signal_name(p.exitcode))
+                               for n, p in self.procs.items()}}
+            extra = self.queries.get("status")
+            return ({**base, **extra()} if extra else base), None
+        query = self.queries.get(command)
+        if query is None:
+            return {}, f"{command!r} is not available in this run"
+        return query(), None
 
     def _silent_actors(self) -> dict[str, float]:
         """Actors whose last heartbeat is older than the timeout: {name: seconds silent}."""
@@ -308,18 +346,3 @@ class Supervisor:
             if proc.is_alive():
                 proc.kill()
                 proc.join(1.0)
-
-
-def inspection_client(endpoint: str, kinds: list[str] | None = None, timeout_s: float = 10.0):
-    """Yield messages from a running supervisor's inspection endpoint."""
-    zctx = zmq.Context.instance()
-    sub = zctx.socket(zmq.SUB)
-    sub.connect(endpoint)
-    for kind in (kinds or [""]):
-        sub.setsockopt(zmq.SUBSCRIBE, kind.encode())
-    try:
-        while sub.poll(int(timeout_s * 1000)):
-            _, payload = sub.recv_multipart()
-            yield decode(payload)
-    finally:
-        sub.close(linger=0)

@@ -97,7 +97,8 @@ def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_fra
 def run_slam(dataset: str, path: str | None = None, config: str | None = None, out: str | None = None,
              clock: str | None = None, max_frames: int | None = None, enhance: str | None = None,
              inspect: str | None = None, progress: bool = True, preset: str | None = None,
-             seed: int = 0, lines: bool | None = None, record: str | None = None) -> RunResult:
+             seed: int = 0, lines: bool | None = None, record: str | None = None,
+             inspect_keys: str | None = None) -> RunResult:
     if dataset not in DATASETS:
         from shared.errors import ConfigError
         raise ConfigError("--dataset", f"unknown dataset {dataset!r}; choose one of {DATASETS}")
@@ -109,8 +110,13 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
         dataset_kind = "euroc"
     else:
         dataset_kind = dataset
+    server_keys = None
     if inspect is not None:
-        check_endpoint(inspect)
+        from actors.inspection import check_inspection
+        server_keys = check_inspection(inspect, inspect_keys)  # loopback, or CURVE keys; ports free
+    elif inspect_keys is not None:
+        from shared.errors import ConfigError
+        raise ConfigError("--inspect-keys", "only applies with --inspect")
     source = open_source(dataset_kind, path, max_frames=max_frames)  # validates the dataset before any process starts
     calib = source.calibration
     out_dir = prepare_out_dir(Path(out) if out else default_out_dir(dataset))
@@ -126,19 +132,31 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
     # trajectory.tum and frames.csv grow as frames complete: a killed launcher still leaves them.
     collector = RunCollector(n_frames=len(source), progress=progress, out_dir=out_dir,
                              frame_stamps=source.timestamps)
+    run_id = f"{dataset}-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}"
+    from canopy.report import to_jsonable
+    from protocol.messages import RunStart
+    run_start = RunStart(run_id=run_id, dataset=dataset, source=source.name, n_frames=len(source),
+                         clock=cfg.runtime.clock, started_at=time.time())
+    queries = {
+        "status": lambda: {"dataset": dataset, "source": source.name, "out_dir": str(out_dir),
+                           "frames_total": len(source), "frames_done": len(collector.poses)},
+        "config": lambda: to_jsonable(_config_dict(cfg)),
+        "stats": lambda: to_jsonable({"tracking": collector.tracking_summary(), "actors": collector.stats_summary()}),
+    }
     supervisor = Supervisor(
         specs, [RingSpec(rings["raw"], cfg.runtime.ring_slots, calib.height, calib.width),
                 RingSpec(rings["enhanced"], cfg.runtime.ring_slots, calib.height, calib.width)],
         source="source", on_event=collector, heartbeat_timeout_s=cfg.runtime.heartbeat_timeout_s,
         ready_timeout_s=cfg.runtime.ready_timeout_s, grace_s=cfg.runtime.grace_s,
-        inspect_endpoint=inspect, run_dir=run_dir)
+        inspect_endpoint=inspect, run_dir=run_dir, inspect_keys=server_keys, run_start=run_start,
+        queries=queries)
     outcome = supervisor.run()
     collector.finish_progress()
     repaired = None
     if record_path and Path(record_path).is_file():
         from canopy.recording import repair_recording
         repaired = repair_recording(record_path)  # the recorder may have died before writing its summary
-    run_info = {"dataset": dataset, "preset": preset if dataset == "synthetic" else None,
+    run_info = {"run_id": run_id, "dataset": dataset, "preset": preset if dataset == "synthetic" else None,
                 "path": str(source.root) if hasattr(source, "root") else path,
                 "source": source.name, "clock": cfg.runtime.clock,
                 "enhancement": getattr(cfg.enhancement, "method", "none"), "config_file": cfg.source_file,
@@ -180,42 +198,11 @@ def prepare_out_dir(out_dir: Path) -> Path:
     return out_dir
 
 
-def check_endpoint(endpoint: str) -> str:
-    """Validate an ``--inspect`` endpoint before any process starts: syntax, host, and that it
-    can be bound now (a port in use fails here with one line)."""
-    import re
-    import socket
-
-    import zmq
-
-    from shared.errors import ConfigError
-
-    where = f"--inspect {endpoint}"
-    m = re.fullmatch(r"(tcp|ipc)://(.+)", endpoint or "")
-    if m is None:
-        raise ConfigError(where, "expected tcp://HOST:PORT or ipc://PATH")
-    if m.group(1) == "tcp":
-        host, sep, port = m.group(2).rpartition(":")
-        if not sep or not host or not (port.isdigit() and 1 <= int(port) <= 65535):
-            raise ConfigError(where, "expected tcp://HOST:PORT with a port number 1..65535")
-        if host not in ("*", "0.0.0.0"):
-            try:
-                socket.getaddrinfo(host.strip("[]"), None)
-            except (socket.gaierror, UnicodeError):
-                raise ConfigError(where, f"unknown host {host!r}") from None
-    zctx = zmq.Context.instance()
-    probe = zctx.socket(zmq.PUB)
-    try:
-        probe.bind(endpoint)
-    except zmq.ZMQError as exc:
-        raise ConfigError(where, f"cannot listen there: {exc}") from None
-    finally:
-        probe.close(linger=0)
-    return endpoint
+def _config_dict(cfg) -> dict:
+    return {"runtime": asdict(cfg.runtime), "enhancement": asdict(cfg.enhancement),
+            "tracking": asdict(cfg.tracking), "mapping": asdict(cfg.mapping)}
 
 
 def _write_config(out_dir: Path, cfg) -> None:
     import yaml
-    doc = {"runtime": asdict(cfg.runtime), "enhancement": asdict(cfg.enhancement),
-           "tracking": asdict(cfg.tracking), "mapping": asdict(cfg.mapping)}
-    (out_dir / "config_used.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+    (out_dir / "config_used.yaml").write_text(yaml.safe_dump(_config_dict(cfg), sort_keys=False))

@@ -194,3 +194,48 @@ class LocalMapUpdate:
 
     def __len__(self) -> int:
         return len(self.landmark_ids)
+
+
+# --- remote inspection (launcher <-> remote clients) -------------------------------
+# Published on the inspection endpoint next to every actor event, and the request/reply
+# channel beside it (see actors/inspection.py). INSPECT_SCHEMA is bumped on any change here.
+
+INSPECT_SCHEMA = 1
+
+
+@message("run_start")
+class RunStart:
+    """First event of a run on the inspection stream: which run this is."""
+    run_id: str
+    dataset: str
+    source: str
+    n_frames: int
+    clock: str
+    started_at: float            # wall time (s since the epoch)
+    schema: int = INSPECT_SCHEMA
+
+
+@message("run_end")
+class RunEnd:
+    """Last event of a run on the inspection stream."""
+    run_id: str
+    ok: bool
+    reason: str
+    wall_s: float
+
+
+@message("inspect_request")
+class InspectRequest:
+    """Client → launcher: ``command`` is one of status, config, stats, stop."""
+    command: str
+    request_id: int = 0
+
+
+@message("inspect_reply")
+class InspectReply:
+    """Launcher → client: the answer to one request (``error`` set when ``ok`` is False)."""
+    request_id: int
+    ok: bool
+    run_id: str = ""
+    payload: dict = field(default_factory=dict)
+    error: str = ""

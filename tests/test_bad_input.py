@@ -129,10 +129,18 @@ def _inspect_port_in_use(tmp):
     holder.bind(f"tcp://127.0.0.1:{port}")
     tmp.joinpath("holder").write_text("")  # keep the socket alive through the fixture
     _HOLD.append(holder)
-    return ["--inspect", f"tcp://127.0.0.1:{port}"], "cannot listen there"
+    return ["--inspect", f"tcp://127.0.0.1:{port}"], "cannot listen on"
 
 
 _HOLD: list = []
+
+
+def _inspect_public_without_keys(tmp):
+    return ["--inspect", f"tcp://0.0.0.0:{_free_port()}"], "a non-loopback address needs CURVE keys"
+
+
+def _inspect_keys_folder_empty(tmp):
+    return ["--inspect", f"tcp://0.0.0.0:{_free_port()}", "--inspect-keys", str(tmp)], "no server.key_secret"
 
 
 def _tiny_images(tmp):
@@ -189,7 +197,7 @@ def _missing_dataset(tmp):
 
 CASES = [_out_is_file, _out_under_file, _out_cannot_be_created, _out_not_writable, _section_is_list,
          _heartbeat_zero, _grace_negative, _ring_slots_huge, _wait_nan, _inspect_malformed, _inspect_bad_scheme,
-         _inspect_unknown_host, _inspect_port_in_use, _tiny_images, _kitti_nan_focal, _euroc_nan_intrinsics,
+         _inspect_unknown_host, _inspect_port_in_use, _inspect_public_without_keys, _inspect_keys_folder_empty, _tiny_images, _kitti_nan_focal, _euroc_nan_intrinsics,
          _euroc_listed_image_missing, _zero_byte_first_image, _mismatched_pair, _max_frames_zero,
          _missing_dataset]
 
