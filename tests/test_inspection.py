@@ -227,3 +227,25 @@ def test_a_run_announces_itself_answers_status_and_stops_on_request(tmp_path):
         assert start.run_id == end.run_id and start.n_frames == 95
     assert proc.returncode == 1 and "stopped by a remote client" in stderr and "Traceback" not in stderr
     assert len(np.loadtxt(out / "trajectory.tum")) >= 10
+
+
+def test_watcher_names_the_run_and_exits_at_its_end(tmp_path):
+    endpoint = f"ipc://{tmp_path}/inspect"
+    launcher = subprocess.Popen([sys.executable, str(ROOT / "launch.py"), "--dataset", "euroc", "--max-frames", "30",
+                                 "--out", str(tmp_path / "run"), "--inspect", endpoint, "--quiet"], cwd=ROOT,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        watcher = subprocess.run([sys.executable, str(ROOT / "tools" / "watch_run.py"), endpoint, "--timeout", "120"],
+                                 cwd=ROOT, capture_output=True, text=True, timeout=300)
+        launcher.communicate(timeout=120)
+    finally:
+        if launcher.poll() is None:
+            launcher.kill()
+            launcher.communicate()
+    assert launcher.returncode == 0
+    assert watcher.returncode == 0, watcher.stderr[-2000:]
+    lines = watcher.stdout.splitlines()
+    assert lines[0].startswith("run   euroc-"), lines[:3]  # the run id, from status or run_start
+    run_id = lines[0].split()[1]
+    assert lines[-1].startswith(f"end   {run_id}  completed"), lines[-3:]
+    assert sum(ln.startswith("pose") for ln in lines) >= 1
