@@ -231,7 +231,7 @@ def test_a_run_announces_itself_answers_status_and_stops_on_request(tmp_path):
 
 def test_watcher_names_the_run_and_exits_at_its_end(tmp_path):
     endpoint = f"ipc://{tmp_path}/inspect"
-    launcher = subprocess.Popen([sys.executable, str(ROOT / "launch.py"), "--dataset", "euroc", "--max-frames", "30",
+    launcher = subprocess.Popen([sys.executable, str(ROOT / "launch.py"), "--dataset", "euroc", "--max-frames", "15",
                                  "--out", str(tmp_path / "run"), "--inspect", endpoint, "--quiet"], cwd=ROOT,
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
@@ -249,3 +249,30 @@ def test_watcher_names_the_run_and_exits_at_its_end(tmp_path):
     run_id = lines[0].split()[1]
     assert lines[-1].startswith(f"end   {run_id}  completed"), lines[-3:]
     assert sum(ln.startswith("pose") for ln in lines) >= 1
+
+
+def test_hostile_clients_do_not_change_a_lockstep_run(tmp_path):
+    """Clients flooding every inspection socket neither change the lockstep trajectory nor break the run."""
+    trajs = []
+    for k, attacked in enumerate((False, True)):
+        endpoint = f"ipc://{tmp_path}/inspect{k}"
+        out = tmp_path / f"run{k}"
+        launcher = subprocess.Popen([sys.executable, str(ROOT / "launch.py"), "--dataset", "kitti", "--max-frames",
+                                     "8", "--out", str(out), "--quiet"] + (["--inspect", endpoint] if attacked else []),
+                                    cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        attacker = None
+        if attacked:
+            attacker = subprocess.Popen([sys.executable, "-c", ATTACKER, endpoint, "6"], stdout=subprocess.PIPE,
+                                        stderr=subprocess.PIPE, text=True)
+        try:
+            _, stderr = launcher.communicate(timeout=300)
+            if attacker is not None:
+                attacker.communicate(timeout=60)
+        finally:
+            for p in (launcher, attacker):
+                if p is not None and p.poll() is None:
+                    p.kill()
+                    p.communicate()
+        assert launcher.returncode == 0, stderr[-2000:]
+        trajs.append((out / "trajectory.tum").read_text())
+    assert trajs[0] == trajs[1]
