@@ -189,6 +189,15 @@ def test_recording_of_a_killed_writer_still_reads(tmp_path):
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(path.read_bytes()[:-7])
     assert 0 < len(list(read_messages(cut))) <= 20
+    # the launcher repairs both into files the indexed reader opens, keeping every whole message
+    from canopy.recording import repair_recording
+    for broken, expected in ((path, 20), (cut, len(list(read_messages(cut))))):
+        assert repair_recording(broken) == expected
+        with open(broken, "rb") as f:
+            reader = make_reader(f)
+            assert reader.get_summary() is not None
+            assert sum(1 for _ in reader.iter_messages()) == expected
+        assert repair_recording(broken) is None  # finished files are left alone
 
 
 # --- the recorder actor, driven directly (no sockets) -------------------------------------------
