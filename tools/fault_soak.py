@@ -3,9 +3,9 @@
 
 Faults cycle through: none, SIGKILL of each actor (source, enhancement, tracking, local_mapping,
 recorder), SIGKILL of the launcher, SIGSTOP of local mapping, Ctrl-C of the process group and
-SIGTERM of the launcher. Every fault waits for a progress event on the
-run's inspection endpoint (a pose of frame 10 or later). After each run: shared-memory rings named after its launcher, its
-socket folder, and actor processes still alive are counted (a launcher killed with SIGKILL
+SIGTERM of the launcher. Every fault waits for a progress event on the run's inspection
+endpoint (a pose of frame 10 or later). After each run: shared-memory rings named after its
+launcher, its socket folder, and actor processes still alive are counted (a launcher killed with SIGKILL
 cannot clean up: its folder must be swept by the next run's start-up, counted at the end).
 
     python tools/fault_soak.py --runs 30            # prints a table, writes docs/results/fault_soak.json
