@@ -156,7 +156,7 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
     if record_path and Path(record_path).is_file():
         from canopy.recording import repair_recording
         repaired = repair_recording(record_path)  # the recorder may have died before writing its summary
-    run_info = {"run_id": run_id, "dataset": dataset, "preset": preset if dataset == "synthetic" else None,
+    run_info = {"run_id": run_id, "launcher_pid": os.getpid(), "dataset": dataset, "preset": preset if dataset == "synthetic" else None,
                 "path": str(source.root) if hasattr(source, "root") else path,
                 "source": source.name, "clock": cfg.runtime.clock,
                 "enhancement": getattr(cfg.enhancement, "method", "none"), "config_file": cfg.source_file,

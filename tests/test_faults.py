@@ -5,6 +5,7 @@ Every kill waits for progress events from the run's inspection endpoint (never f
 time), and every time bound is generous: these tests run beside other jobs on 2 shared cores,
 and what they check is that a run ends by itself with the right message, not how fast.
 """
+import json
 import os
 import shutil
 import signal
@@ -28,17 +29,14 @@ KITTI = ROOT / "data" / "kitti06_snippet"
 END_WITHIN_S = 60
 
 
-def _shm_segments() -> set[str]:
-    """Canopy ring segments whose launcher is gone (names are canopy_<launcher pid>_...): other
-    runs on the same machine, alive meanwhile, are not this test's leaks."""
-    import psutil
+def _shm_segments(launcher_pid: int) -> set[str]:
+    """Ring segments of one launcher (named canopy_<launcher pid>_...): other runs on the same
+    machine meanwhile are not this test's leaks."""
+    return {n for n in os.listdir("/dev/shm") if n.startswith(f"canopy_{launcher_pid}_")}
 
-    out = set()
-    for n in os.listdir("/dev/shm"):
-        parts = n.split("_")
-        if n.startswith("canopy_") and not (len(parts) > 2 and parts[1].isdigit() and psutil.pid_exists(int(parts[1]))):
-            out.add(n)
-    return out
+
+def _launcher_pid(out: Path) -> int:
+    return json.loads((out / "metrics.json").read_text())["run"]["launcher_pid"]
 
 
 def _start(tmp_path, *args):
@@ -72,7 +70,6 @@ def _wait_gone(pids, timeout_s=END_WITHIN_S):
 
 
 def test_sigkill_of_the_launcher_leaves_a_parseable_trajectory_and_nothing_behind(tmp_path):
-    before = _shm_segments()
     proc, endpoint = _start(tmp_path, "--dataset", "euroc")
     try:
         pids = _watch_until(endpoint, 20)
@@ -94,7 +91,7 @@ def test_sigkill_of_the_launcher_leaves_a_parseable_trajectory_and_nothing_behin
     assert stale, "expected the killed launcher's socket folder"
     sweep_stale_runs()
     assert not any(d.exists() for d in stale)
-    assert _shm_segments() <= before, "shared memory leaked"
+    assert not _shm_segments(proc.pid), "shared memory leaked"
 
 
 def test_frozen_local_mapping_is_blamed_not_tracking(tmp_path):
@@ -102,7 +99,6 @@ def test_frozen_local_mapping_is_blamed_not_tracking(tmp_path):
     cfg.write_text((ROOT / "configs" / "kitti.yaml").read_text().replace("heartbeat_timeout_s: 5.0",
                                                                          "heartbeat_timeout_s: 3.0"))
     assert "heartbeat_timeout_s: 3.0" in cfg.read_text()
-    before = _shm_segments()
     proc, endpoint = _start(tmp_path, "--dataset", "kitti", "--config", str(cfg))
     try:
         pids = _watch_until(endpoint, 5)
@@ -117,7 +113,7 @@ def test_frozen_local_mapping_is_blamed_not_tracking(tmp_path):
     assert "Traceback" not in stderr
     assert not _wait_gone(pids.values())
     assert len(np.loadtxt(tmp_path / "run" / "trajectory.tum")) >= 5
-    assert _shm_segments() <= before
+    assert not _shm_segments(proc.pid)
 
 
 def test_sigkill_of_the_recorder_leaves_an_mcap_that_opens(tmp_path):
@@ -157,7 +153,6 @@ def test_damaged_image_mid_run_names_its_file_and_frame(tmp_path, damage):
     victim = data / "image_l" / "000006.png"
     blob = victim.read_bytes()
     victim.write_bytes(blob[: len(blob) // 3] if damage == "truncated" else b"")
-    before = _shm_segments()
     res = subprocess.run([sys.executable, str(ROOT / "launch.py"), "--dataset", "kitti", "--path", str(data),
                           "--out", str(tmp_path / "run"), "--quiet"], cwd=ROOT, capture_output=True, text=True,
                          timeout=300)
@@ -167,4 +162,4 @@ def test_damaged_image_mid_run_names_its_file_and_frame(tmp_path, damage):
     assert len(np.loadtxt(tmp_path / "run" / "trajectory.tum")) == 6
     rows = [r.split(",") for r in (tmp_path / "run" / "frames.csv").read_text().splitlines()[1:]]
     assert [r[2] for r in rows] == ["init"] + ["ok"] * 5 + ["not_reached"] * 4
-    assert _shm_segments() <= before
+    assert not _shm_segments(_launcher_pid(tmp_path / "run"))

@@ -32,17 +32,14 @@ ROOT = Path(__file__).resolve().parents[1]
 RUN_ENDS_WITHIN_S = 30.0
 
 
-def _shm_segments() -> set[str]:
-    """Canopy ring segments whose launcher is gone (names are canopy_<launcher pid>_...): other
-    runs on the same machine, alive meanwhile, are not this test's leaks."""
-    import psutil
+def _shm_segments(launcher_pid: int) -> set[str]:
+    """Ring segments of one launcher (named canopy_<launcher pid>_...): other runs on the same
+    machine meanwhile are not this test's leaks."""
+    return {n for n in os.listdir("/dev/shm") if n.startswith(f"canopy_{launcher_pid}_")}
 
-    out = set()
-    for n in os.listdir("/dev/shm"):
-        parts = n.split("_")
-        if n.startswith("canopy_") and not (len(parts) > 2 and parts[1].isdigit() and psutil.pid_exists(int(parts[1]))):
-            out.add(n)
-    return out
+
+def _launcher_pid(out: Path) -> int:
+    return json.loads((out / "metrics.json").read_text())["run"]["launcher_pid"]
 
 
 def _launch(*args, **kw):
@@ -52,7 +49,6 @@ def _launch(*args, **kw):
 
 
 def test_euroc_default_run_writes_every_output(tmp_path):
-    before = _shm_segments()
     out = tmp_path / "run"
     res = _launch("--dataset", "euroc", "--out", str(out), "--quiet")
     assert res.returncode == 0, res.stderr[-3000:]
@@ -75,12 +71,11 @@ def test_euroc_default_run_writes_every_output(tmp_path):
     frames = (out / "frames.csv").read_text().splitlines()
     assert len(frames) == 96 and frames[0].startswith("index,timestamp,status")
     assert all(",none," in row for row in frames[1:])  # the enhancement decision of each frame
-    assert _shm_segments() <= before
+    assert not _shm_segments(_launcher_pid(out))
 
 
 @pytest.mark.parametrize("victim", ["tracking", "local_mapping", "enhancement", "source"])
 def test_sigkill_of_an_actor_ends_run_cleanly(tmp_path, victim):
-    before = _shm_segments()
     endpoint = f"ipc://{tmp_path}/inspect"
     out = tmp_path / "run"
     proc = subprocess.Popen([sys.executable, str(ROOT / "launch.py"), "--dataset", "euroc", "--clock", "realtime",
@@ -110,7 +105,7 @@ def test_sigkill_of_an_actor_ends_run_cleanly(tmp_path, victim):
     traj = np.loadtxt(out / "trajectory.tum")
     assert len(traj) >= posed  # every pose the run announced before the kill is on disk
     assert (out / "metrics.json").is_file()
-    assert _shm_segments() <= before, "shared memory leaked"
+    assert not _shm_segments(proc.pid), "shared memory leaked"
 
 
 @pytest.mark.parametrize("args, fragment", [
@@ -140,13 +135,12 @@ def test_corrupt_image_mid_run_names_the_file(tmp_path):
     shutil.copytree(ROOT / "data" / "euroc_v101_micro", data, ignore=shutil.ignore_patterns("imu0"))
     victim = sorted((data / "mav0" / "cam0" / "data").glob("*.png"))[10]
     victim.write_bytes(b"\x89PNG\r\n\x1a\n not really a png")
-    before = _shm_segments()
     res = _launch("--dataset", "euroc", "--path", str(data), "--out", str(tmp_path / "run"), "--quiet", timeout=200)
     assert res.returncode == 1
     assert victim.name in res.stderr
     assert "Traceback" not in res.stderr
     assert len(np.loadtxt(tmp_path / "run" / "trajectory.tum")) == 10
-    assert _shm_segments() <= before
+    assert not _shm_segments(_launcher_pid(tmp_path / "run"))
 
 
 def test_lockstep_runs_are_identical_across_processes(tmp_path):
@@ -215,7 +209,6 @@ def test_lines_flow_through_the_actors(tmp_path):
 def test_user_interrupt_stops_cleanly_and_keeps_results(tmp_path, how):
     """Ctrl-C reaches the whole process group; SIGTERM only the launcher. Both end the run
     cleanly with what was computed written out and the shared memory removed."""
-    before = _shm_segments()
     endpoint = f"ipc://{tmp_path}/inspect"
     out = tmp_path / "run"
     proc = subprocess.Popen([sys.executable, str(ROOT / "launch.py"), "--dataset", "euroc", "--clock", "realtime",
@@ -239,7 +232,7 @@ def test_user_interrupt_stops_cleanly_and_keeps_results(tmp_path, how):
     assert proc.returncode == 1
     assert "interrupted by the user" in stderr and "Traceback" not in stderr
     assert len(np.loadtxt(out / "trajectory.tum")) >= posed
-    assert _shm_segments() <= before
+    assert not _shm_segments(proc.pid)
 
 
 def test_enhancement_actor_rejects_a_frame_of_the_wrong_size():
