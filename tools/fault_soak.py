@@ -63,7 +63,7 @@ def one_run(k: int, fault: str, work: Path, config: Path) -> dict:
                             start_new_session=True)
     pids, posed, injected = {}, 0, False
     try:
-        for msg in inspection_client(endpoint, ["ready", "pose"], timeout_s=120):
+        for msg in inspection_client(endpoint, ["ready", "pose"], timeout_s=120, until_run_end=True):
             if isinstance(msg, ActorReady):
                 pids[msg.actor] = msg.pid
             elif isinstance(msg, FramePose):
