@@ -1,0 +1,89 @@
+"""Typed parameters of loop closing and relocalisation (YAML section ``loop``).
+
+Defaults follow ORB-SLAM2's LoopClosing / KeyFrameDatabase (the open system AGRI §3.4
+builds on, with DBoW3 in place of DBoW2): candidates scoring at least the worst
+covisible neighbour, groups accumulating 0.75 of the best group score, three
+consecutive consistent keyframes, and at least 40 inliers after refinement.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from shared.errors import ConfigError
+
+CHI2_95_2DOF = 5.991
+CHI2_95_3DOF = 7.815
+
+
+@dataclass(frozen=True)
+class LoopParams:
+    enabled: bool = True
+    vocabulary: str = ""                  # path of the ORB vocabulary ("" = the shipped default)
+    # --- detection (ORB-SLAM DetectLoopCandidates) ------------------------------------------
+    min_keyframes_since_loop: int = 10    # no detection right after a loop or at the start
+    covisibility_min_shared: int = 15     # landmarks two keyframes share to be covisible
+    group_size: int = 10                  # best covisible neighbours forming a candidate's group
+    min_common_words_ratio: float = 0.8   # of the best candidate's words shared with the query
+    group_score_ratio: float = 0.75       # of the best accumulated group score
+    consistency_keyframes: int = 3        # consecutive keyframes a candidate group must persist
+    # PL-SLAM combined score: weight points / lines by their counts and image spread
+    use_lines: bool = False
+    # --- geometric verification (stereo PnP RANSAC, then motion-only refinement) -------------
+    direct_index_levels_up: int = 2       # match features sharing a vocabulary node this many levels up
+    max_hamming: int = 50                 # ORB-SLAM TH_LOW
+    match_ratio: float = 0.75             # SearchByBoW's nearest / second nearest
+    min_matches: int = 20                 # descriptor matches needed before RANSAC
+    pnp_iterations: int = 300
+    pnp_reprojection_error: float = 3.0   # px
+    pnp_confidence: float = 0.999
+    min_pnp_inliers: int = 20
+    guided_search_radius: float = 10.0    # px, projecting the candidate's points with the PnP pose
+    refine_rounds: int = 4
+    refine_iterations: int = 10
+    pixel_sigma: float = 1.0
+    scale_factor: float = 1.2
+    chi2_mono: float = CHI2_95_2DOF
+    chi2_stereo: float = CHI2_95_3DOF
+    min_inliers: int = 40                 # after guided search + refinement (ORB-SLAM: 40)
+    # --- pose graph (SE(3): stereo fixes the scale) ---------------------------------------
+    essential_min_shared: int = 100       # covisibility edges of the essential graph (ORB-SLAM)
+    odometry_sigma_rot: float = 0.01      # rad; relative poses from the map are precise
+    odometry_sigma_trans: float = 0.01    # m
+    loop_sigma_rot: float = 0.01
+    loop_sigma_trans: float = 0.02
+    robust_kernel_k: float = math.sqrt(CHI2_95_3DOF * 2)  # Huber width on whitened 6-d errors
+    pgo_max_iterations: int = 50
+    # --- full bundle adjustment after a loop (AGRI §3.4.2) ---------------------------------
+    full_ba: bool = True
+    full_ba_iterations: int = 10
+    # --- relocalisation -------------------------------------------------------------------
+    reloc_min_inliers: int = 30
+
+    def validate(self) -> "LoopParams":
+        def need(ok: bool, name: str, what: str) -> None:
+            if not ok:
+                raise ConfigError("LoopParams", f"{name} {what} (got {getattr(self, name)!r})")
+
+        need(self.min_keyframes_since_loop >= 0, "min_keyframes_since_loop", "must be >= 0")
+        need(self.covisibility_min_shared >= 1, "covisibility_min_shared", "must be >= 1")
+        need(self.group_size >= 1, "group_size", "must be >= 1")
+        need(0 < self.min_common_words_ratio <= 1, "min_common_words_ratio", "must be in (0, 1]")
+        need(0 < self.group_score_ratio <= 1, "group_score_ratio", "must be in (0, 1]")
+        need(self.consistency_keyframes >= 1, "consistency_keyframes", "must be >= 1")
+        need(self.direct_index_levels_up >= 0, "direct_index_levels_up", "must be >= 0")
+        need(0 < self.max_hamming <= 256, "max_hamming", "must be in (0, 256]")
+        need(0 < self.match_ratio <= 1, "match_ratio", "must be in (0, 1]")
+        need(self.min_matches >= 4, "min_matches", "must be >= 4 (PnP)")
+        need(self.min_pnp_inliers >= 4, "min_pnp_inliers", "must be >= 4")
+        need(self.min_inliers >= self.min_pnp_inliers, "min_inliers", "must be >= min_pnp_inliers")
+        need(self.pnp_reprojection_error > 0, "pnp_reprojection_error", "must be > 0")
+        need(self.refine_rounds >= 1 and self.refine_iterations >= 1, "refine_rounds", "and refine_iterations must be >= 1")
+        need(min(self.odometry_sigma_rot, self.odometry_sigma_trans, self.loop_sigma_rot,
+                 self.loop_sigma_trans) > 0, "odometry_sigma_rot", "and all pose-graph sigmas must be > 0")
+        need(self.robust_kernel_k > 0, "robust_kernel_k", "must be > 0")
+        need(self.reloc_min_inliers >= 4, "reloc_min_inliers", "must be >= 4")
+        return self
+
+    def __post_init__(self):
+        self.validate()
