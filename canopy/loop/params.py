@@ -22,6 +22,7 @@ class LoopParams:
     vocabulary: str = ""                  # path of the ORB vocabulary ("" = the shipped default)
     # --- detection (ORB-SLAM DetectLoopCandidates) ------------------------------------------
     min_keyframes_since_loop: int = 10    # no detection right after a loop or at the start
+    exclude_recent_keyframes: int = 20    # the latest keyframes are the same place, not a revisit
     covisibility_min_shared: int = 15     # landmarks two keyframes share to be covisible
     group_size: int = 10                  # best covisible neighbours forming a candidate's group
     min_common_words_ratio: float = 0.8   # of the best candidate's words shared with the query
@@ -66,6 +67,7 @@ class LoopParams:
                 raise ConfigError("LoopParams", f"{name} {what} (got {getattr(self, name)!r})")
 
         need(self.min_keyframes_since_loop >= 0, "min_keyframes_since_loop", "must be >= 0")
+        need(self.exclude_recent_keyframes >= 0, "exclude_recent_keyframes", "must be >= 0")
         need(self.covisibility_min_shared >= 1, "covisibility_min_shared", "must be >= 1")
         need(self.group_size >= 1, "group_size", "must be >= 1")
         need(0 < self.min_common_words_ratio <= 1, "min_common_words_ratio", "must be in (0, 1]")
