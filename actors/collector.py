@@ -17,7 +17,7 @@ import numpy as np
 from canopy.metrics import evaluate_trajectory
 from canopy.report import plot_trajectory_png, write_json, write_ply_lines, write_ply_points
 from canopy.trajectory_io import write_tum
-from protocol.messages import ActorError, ActorStats, FramePose, MapSnapshot
+from protocol.messages import ActorError, ActorStats, FramePose, LoopResult, MapSnapshot
 from shared.types import Trajectory
 
 ACTOR_ORDER = ("source", "enhancement", "tracking", "local_mapping", "loop_closing")
@@ -64,6 +64,7 @@ class RunCollector:
         self._last_print = 0.0
         self._t0 = time.monotonic()
         self._first_pose_t: float | None = None
+        self.loops: list[LoopResult] = []  # closed loops, in the order the loop closer found them
 
     # -- events --------------------------------------------------------------------------
     def __call__(self, msg) -> None:
@@ -87,6 +88,8 @@ class RunCollector:
             rec.extra.update(msg.extra)
         elif isinstance(msg, ActorError):
             self.errors.append(msg)
+        elif isinstance(msg, LoopResult) and msg.closed:
+            self.loops.append(msg)
 
     def _print_progress(self, force: bool = False) -> None:
         now = time.monotonic()
@@ -134,8 +137,10 @@ class RunCollector:
     def write_frames_csv(self, path: Path) -> Path:
         """One row per frame: tracking outcome, enhancement decision and timings."""
         cols = ["index", "timestamp", "status", "keyframe", "inliers", "matches", "enhance_method",
-                "mean_in", "mean_out", "enhance_ms", "orb_ms", "stereo_ms", "tracking_ms", "lines", "line_inliers"]
+                "mean_in", "mean_out", "enhance_ms", "orb_ms", "stereo_ms", "tracking_ms", "lines", "line_inliers",
+                "loop_candidate"]
         rows = [",".join(cols)]
+        loop_at = {int(lp.keyframe_index): int(lp.candidate) for lp in self.loops}  # keyframe closing a loop -> place
         for idx in sorted(self.poses):
             p = self.poses[idx]
             e, t = p.enhancement, p.timings_ms
@@ -147,7 +152,7 @@ class RunCollector:
                                   str(p.n_inliers), str(p.n_matches), str(e.get("method", "")),
                                   num(e.get("mean_in")), num(e.get("mean_out")), num(t.get("enhance")),
                                   num(t.get("orb")), num(t.get("stereo")), num(t.get("total")),
-                                  str(p.n_lines), str(p.n_line_inliers)]))
+                                  str(p.n_lines), str(p.n_line_inliers), str(loop_at.get(int(p.index), ""))]))
         path.write_text("\n".join(rows) + "\n")
         return path
 
@@ -183,6 +188,9 @@ class RunCollector:
         metrics["tracking"] = self.tracking_summary()
         metrics["map_points"] = int(len(points))
         metrics["map_lines"] = int(len(lines))
+        metrics["loops"] = {"closed": len(self.loops),
+                            "pairs": [{"keyframe": int(lp.keyframe_index), "candidate": int(lp.candidate),
+                                       "inliers": int(lp.n_inliers)} for lp in self.loops]}
         metrics["run"] = run_info
         files["metrics"] = str(write_json(out_dir / "metrics.json", metrics))
         stats = self.stats_summary()
@@ -205,6 +213,9 @@ def format_summary(summary: dict, outcome_reason: str, n_cores: int) -> str:
              f"{t['keyframes']} keyframes, {t['frames_lost']} lost",
              f"  tracking success     {t['tracking_success_percent']:.1f} %",
              f"  map                  {m.get('map_points', 0)} points, {m.get('map_lines', 0)} line segments"]
+    loops = m.get("loops") or {}
+    if "loop_closing" in summary.get("stats", {}) or loops.get("closed"):
+        lines.append(f"  loops closed         {loops.get('closed', 0)}")
     ate = m.get("ate")
     if ate and ate.get("rmse") is not None:
         lines.append(f"  ATE (SE3-aligned)    rmse {ate['rmse']:.4f} m   max {ate['max']:.4f} m   (n={ate['n']})")

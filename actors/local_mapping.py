@@ -5,6 +5,13 @@ A thin loop around ``canopy.backend.LocalMapper``, which owns the map
 the supervisor gets a snapshot of keyframe poses and map points at most
 every ``snapshot_period_s`` and always at the end, so a crash elsewhere
 still leaves the map computed so far.
+
+With loop closing on, each inserted keyframe also goes to the loop closer.
+In lockstep the actor waits for the loop closer's answer before answering
+tracking (repeatable runs; a loop correction reaches tracking with the
+update of the keyframe that closed it); in realtime answers are applied
+whenever they arrive and the corrected local map is sent to tracking then.
+At the end the loop closer is drained before the final map is published.
 """
 from __future__ import annotations
 
@@ -14,7 +21,9 @@ import numpy as np
 
 from actors.runtime import Actor, ActorContext
 from canopy.backend import LocalMapper
-from protocol.messages import EndOfStream, KeyframeData, MapSnapshot
+from canopy.loop.mapping_hooks import apply_loop_result, loop_keyframe_message
+from protocol.messages import EndOfStream, KeyframeData, LoopResult, MapSnapshot
+from shared.errors import CanopyError
 
 
 class LocalMappingActor(Actor):
@@ -25,19 +34,64 @@ class LocalMappingActor(Actor):
         self.snapshot_period = float(self.config.get("snapshot_period_s", 0.5))
         self.last_snapshot = 0.0
         self.n_keyframes = 0
+        self.loop_on = ctx.has_output("loop_closing")
+        self.lockstep = self.config.get("clock") == "lockstep"
+        self.loop_wait_s = float(self.config.get("lockstep_wait_s", 60.0))
+        self.last_update = None
+        self.loops = 0
 
     def on_message(self, msg, ctx: ActorContext) -> None:
         if isinstance(msg, KeyframeData):
             update = self.mapper.insert_keyframe(msg)
             self.n_keyframes += 1
+            if self.loop_on:
+                ctx.send("loop_closing", loop_keyframe_message(msg, self.mapper, update))
+                if self.lockstep:
+                    self._on_loop_result(self._wait_loop_result(msg.index, ctx), update)
+            self.last_update = update
             # Tracking may already have finished at the end of a realtime run: never block on it.
             ctx.send("tracking", update, block=False)
             ctx.extra.update({"keyframes": self.n_keyframes, "landmarks": len(self.mapper.landmarks),
                               **{f"{k}_ms": float(v) for k, v in update.timings.items()}})
             if time.monotonic() - self.last_snapshot >= self.snapshot_period:
                 self._publish_snapshot(ctx, final=False)
+        elif isinstance(msg, LoopResult):  # realtime: a correction arriving between keyframes
+            if self._on_loop_result(msg, self.last_update) and self.last_update is not None:
+                ctx.send("tracking", self.last_update, block=False)
         elif isinstance(msg, EndOfStream):
+            if self.loop_on:
+                self._drain_loop_closer(msg, ctx)
             ctx.stop()
+
+    def _on_loop_result(self, result: LoopResult, update) -> bool:
+        changed = apply_loop_result(self.mapper, result, update)
+        self.loops = max(self.loops, int(result.loops))
+        return changed
+
+    def _wait_loop_result(self, kf_index: int, ctx: ActorContext) -> LoopResult:
+        deadline = time.monotonic() + self.loop_wait_s
+        while time.monotonic() < deadline:
+            msg = ctx.recv_inbox(100)
+            if isinstance(msg, LoopResult):
+                if msg.keyframe_index == kf_index:
+                    return msg
+                self._on_loop_result(msg, None)
+            elif msg is not None:
+                raise CanopyError(f"local_mapping: unexpected {type(msg).__name__} while waiting for the loop "
+                                  f"closer's answer on keyframe {kf_index}")
+        raise CanopyError(f"local_mapping: no loop-closing answer for keyframe {kf_index} within {self.loop_wait_s:.0f} s")
+
+    def _drain_loop_closer(self, end: EndOfStream, ctx: ActorContext) -> None:
+        """Forward the end of stream and apply the loop closer's remaining answers until it
+        ends too, so that the final map carries every correction."""
+        ctx.send("loop_closing", EndOfStream(n_frames=end.n_frames, sent_at=time.time()), block=False)
+        deadline = time.monotonic() + self.loop_wait_s
+        while time.monotonic() < deadline:
+            msg = ctx.recv_inbox(100)
+            if isinstance(msg, LoopResult):
+                self._on_loop_result(msg, None)
+            elif isinstance(msg, EndOfStream):
+                return
 
     def _snapshot(self, final: bool) -> MapSnapshot:
         self.last_snapshot = time.monotonic()

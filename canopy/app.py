@@ -64,8 +64,10 @@ def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_fra
                       rings: dict[str, str], calib, frame_rate_hz: float,
                       record: str | None = None) -> list[ActorSpec]:
     ep = {name: Supervisor.endpoints(run_dir, name)
-          for name in ("source", "enhancement", "tracking", "local_mapping", "recorder")}
+          for name in ("source", "enhancement", "tracking", "local_mapping", "loop_closing", "recorder")}
     to_recorder = ["recorder"] if record else []
+    loop_on = cfg.loop is not None and cfg.loop.enabled
+    to_loop = ["loop_closing"] if loop_on else []
     events = f"ipc://{run_dir}/supervisor.events"
     rt = cfg.runtime
     # In realtime a frame older than max_lag_frames periods is skipped when a newer one waits.
@@ -87,9 +89,11 @@ def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_fra
               "enhancement": cfg.enhancement, "lockstep_wait_s": rt.lockstep_wait_s},
              ["local_mapping", "source", *to_recorder]),
         spec("local_mapping", "actors.local_mapping:LocalMappingActor",
-             {"calib": calib, "params": cfg.mapping, "snapshot_period_s": rt.map_snapshot_period_s},
-             ["tracking", *to_recorder]),
-    ] + ([spec("recorder", "actors.recorder:RecorderActor",
+             {"calib": calib, "params": cfg.mapping, "snapshot_period_s": rt.map_snapshot_period_s,
+              "lockstep_wait_s": rt.lockstep_wait_s},
+             ["tracking", *to_recorder, *to_loop]),
+    ] + ([spec("loop_closing", "actors.loop_closing:LoopClosingActor", {"calib": calib, "params": cfg.loop},
+               ["local_mapping"])] if loop_on else []) + ([spec("recorder", "actors.recorder:RecorderActor",
                {"path": record, "ring": rings["enhanced"], "image_every": 1, "end_of_streams": 2}, [])]
          if record else [])
 
@@ -97,11 +101,15 @@ def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_fra
 def run_slam(dataset: str, path: str | None = None, config: str | None = None, out: str | None = None,
              clock: str | None = None, max_frames: int | None = None, enhance: str | None = None,
              inspect: str | None = None, progress: bool = True, preset: str | None = None,
-             seed: int = 0, lines: bool | None = None, record: str | None = None) -> RunResult:
+             seed: int = 0, lines: bool | None = None, record: str | None = None,
+             loop: bool | None = None) -> RunResult:
     if dataset not in DATASETS:
         from shared.errors import ConfigError
         raise ConfigError("--dataset", f"unknown dataset {dataset!r}; choose one of {DATASETS}")
-    cfg = with_overrides(load_run_config(dataset, config), clock=clock, enhance=enhance, lines=lines)
+    cfg = with_overrides(load_run_config(dataset, config), clock=clock, enhance=enhance, lines=lines, loop=loop)
+    if cfg.loop is not None and cfg.loop.enabled:  # a missing vocabulary is an error before any process starts
+        from canopy.loop.vocabulary import check_vocabulary
+        check_vocabulary(cfg.loop.vocabulary)
     if dataset == "synthetic":
         # A generated sequence is written in the EuRoC ASL layout and read as such.
         if path is None:
@@ -135,6 +143,7 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
                 "source": source.name, "clock": cfg.runtime.clock,
                 "enhancement": getattr(cfg.enhancement, "method", "none"), "config_file": cfg.source_file,
                 "lines": bool(cfg.tracking.use_lines), "recording": record_path,
+                "loop_closing": bool(cfg.loop is not None and cfg.loop.enabled),
                 "outcome": outcome.reason, "ok": outcome.ok, "wall_s": outcome.wall_s,
                 "frames_per_s": len(collector.poses) / outcome.wall_s if outcome.wall_s else None,
                 "cpu_count": os.cpu_count(), "calibration": calib.to_dict(),
@@ -151,4 +160,6 @@ def _write_config(out_dir: Path, cfg) -> None:
     import yaml
     doc = {"runtime": asdict(cfg.runtime), "enhancement": asdict(cfg.enhancement),
            "tracking": asdict(cfg.tracking), "mapping": asdict(cfg.mapping)}
+    if cfg.loop is not None:
+        doc["loop"] = asdict(cfg.loop)
     (out_dir / "config_used.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))

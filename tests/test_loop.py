@@ -176,3 +176,33 @@ def test_loop_edge_spreads_drift_and_landmarks_follow_their_keyframe():
     X_before = X_cam @ est[80][:3, :3].T + est[80][:3, 3]
     X_after = correct_landmarks(X_before, np.array([80]), C)
     np.testing.assert_allclose(X_after, X_cam @ res.poses[80][:3, :3].T + res.poses[80][:3, 3], atol=1e-9)
+
+
+# ----------------------------------------------------------------------------- generated revisit
+@pytest.fixture(scope="module")
+def day_loop_views():
+    """Four rendered stereo views of the generated day-loop (exact poses): near the start, its
+    revisit after one lap, and two other places (other rows of the same-looking orchard)."""
+    from canopy.synthetic import SequenceGenerator, resolve_params
+
+    gen = SequenceGenerator(resolve_params("day-loop"), seed=0)
+    P = np.array([T[:3, 3] for T in gen.track.poses])
+    half = len(P) // 2
+    revisit = half + int(np.argmin(np.linalg.norm(P[half:] - P[5], axis=1)))
+    views = {}
+    for i in (5, revisit, 300, 600):
+        left, right, _ = gen.stereo(i)
+        views[i] = describe_stereo_pair(i, 0.0, left, right, gen.calibration)
+    return gen, revisit, views
+
+
+def test_generated_revisit_verified_with_exact_relative_pose(day_loop_views):
+    gen, revisit, views = day_loop_views
+    assert revisit > 900  # after one lap (72 m), not a neighbour in time
+    v = verify_candidate(views[revisit], views[5], gen.calibration, LoopParams())
+    assert v.constraint is not None, v.reason
+    E = se3_inv(se3_inv(gen.track.poses[5]) @ gen.track.poses[revisit]) @ v.constraint.T_cand_query
+    assert np.linalg.norm(E[:3, 3]) < 0.01
+    assert np.degrees(rotation_angle(E[:3, :3])) < 0.2
+    for other in (300, 600):  # other rows: look alike, are not the place
+        assert verify_candidate(views[revisit], views[other], gen.calibration, LoopParams()).constraint is None

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from canopy.frontend.geometry import rotation_angle, se3_inv
 from canopy.loop.detector import LoopDetector
 from canopy.loop.keyframe import PlaceKeyframe
 from canopy.loop.params import LoopParams
@@ -35,11 +36,33 @@ class LoopClosure:
 class LoopCloser:
     def __init__(self, calib: StereoCalibration, params: LoopParams | None = None, vocabulary=None):
         self.params = (params or LoopParams()).validate()
-        self.detector = LoopDetector(calib, self.params, vocabulary)
+        self.detector = LoopDetector(calib, self.params, vocabulary, plausible=self.drift_check)
         self.vocabulary = vocabulary
         self.poses: dict[int, np.ndarray] = {}
         self.loop_edges: list[PoseGraphEdge] = []
         self.closures: list[LoopClosure] = []
+
+    def path_length(self, a: int, b: int) -> float:
+        """Distance travelled between keyframes ``a`` and ``b`` along the keyframe sequence."""
+        lo, hi = min(a, b), max(a, b)
+        ks = [k for k in sorted(self.poses) if lo <= k <= hi]
+        P = np.array([self.poses[k][:3, 3] for k in ks]).reshape(-1, 3)
+        return float(np.linalg.norm(np.diff(P, axis=0), axis=1).sum())
+
+    def drift_check(self, c: LoopConstraint) -> str:
+        """'' if the correction the loop asks for is within the drift the path allows, else
+        'drift' (see ``LoopParams.max_drift_per_metre``)."""
+        p = self.params
+        if c.candidate not in self.poses or c.query not in self.poses:
+            return ""
+        T_map = se3_inv(self.poses[c.candidate]) @ self.poses[c.query]
+        E = se3_inv(T_map) @ c.T_cand_query
+        d = self.path_length(c.candidate, c.query)
+        dt = float(np.linalg.norm(E[:3, 3]))
+        dr = float(np.degrees(rotation_angle(E[:3, :3])))
+        if dt > p.max_drift_floor_m + p.max_drift_per_metre * d or dr > p.max_rot_drift_floor_deg + p.max_rot_drift_deg_per_metre * d:
+            return "drift"
+        return ""
 
     @property
     def n_loops(self) -> int:

@@ -67,8 +67,12 @@ class DetectionStats:
 
 
 class LoopDetector:
-    def __init__(self, calib: StereoCalibration, params: LoopParams | None = None, vocabulary=None):
+    def __init__(self, calib: StereoCalibration, params: LoopParams | None = None, vocabulary=None,
+                 plausible=None):
+        """``plausible(constraint) -> str``: "" to accept a verified constraint, else why not
+        (the loop closer checks it against the drift the map can have)."""
         self.calib = calib
+        self.plausible = plausible
         self.params = (params or LoopParams()).validate()
         self.vocabulary = vocabulary
         self.database = KeyframeDatabase()
@@ -144,9 +148,12 @@ class LoopDetector:
         self.stats.consistent += len(consistent)
         for c in consistent:
             v = verify_candidate(kf, self.keyframes[c], self.calib, p, self.vocabulary)
+            reason = v.kind
             if v.constraint is not None:
-                self.stats.verified += 1
-                return v.constraint
-            key = v.reason.split(":")[0].split(" ")[-1] if ":" in v.reason else v.reason
-            self.stats.rejected[key] = self.stats.rejected.get(key, 0) + 1
+                why = self.plausible(v.constraint) if self.plausible is not None else ""
+                if not why:
+                    self.stats.verified += 1
+                    return v.constraint
+                reason = why
+            self.stats.rejected[reason] = self.stats.rejected.get(reason, 0) + 1
         return None

@@ -47,6 +47,14 @@ class LoopParams:
     chi2_mono: float = CHI2_95_2DOF
     chi2_stereo: float = CHI2_95_3DOF
     min_inliers: int = 40                 # after guided search + refinement (ORB-SLAM: 40)
+    # Odometry consistency (the idea of Kimera-RPGO's pairwise consistency check): a loop may
+    # only correct what drift can have accumulated along the path between the two keyframes.
+    # Orchard rows repeat (same trees every few metres), and a view of the next row or the
+    # next tree can pass PnP with 40+ inliers; it then asks for a jump of metres.
+    max_drift_per_metre: float = 0.015   # m of translation drift per metre travelled
+    max_drift_floor_m: float = 0.25
+    max_rot_drift_deg_per_metre: float = 0.2
+    max_rot_drift_floor_deg: float = 3.0
     # --- pose graph (SE(3): stereo fixes the scale) ---------------------------------------
     essential_min_shared: int = 100       # covisibility edges of the essential graph (ORB-SLAM)
     odometry_sigma_rot: float = 0.01      # rad; relative poses from the map are precise
@@ -80,6 +88,10 @@ class LoopParams:
         need(self.min_pnp_inliers >= 4, "min_pnp_inliers", "must be >= 4")
         need(self.min_inliers >= self.min_pnp_inliers, "min_inliers", "must be >= min_pnp_inliers")
         need(self.pnp_reprojection_error > 0, "pnp_reprojection_error", "must be > 0")
+        need(self.max_drift_per_metre >= 0 and self.max_drift_floor_m >= 0, "max_drift_per_metre",
+             "and max_drift_floor_m must be >= 0")
+        need(self.max_rot_drift_deg_per_metre >= 0 and self.max_rot_drift_floor_deg >= 0,
+             "max_rot_drift_deg_per_metre", "and max_rot_drift_floor_deg must be >= 0")
         need(self.refine_rounds >= 1 and self.refine_iterations >= 1, "refine_rounds", "and refine_iterations must be >= 1")
         need(min(self.odometry_sigma_rot, self.odometry_sigma_trans, self.loop_sigma_rot,
                  self.loop_sigma_trans) > 0, "odometry_sigma_rot", "and all pose-graph sigmas must be > 0")

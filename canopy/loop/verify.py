@@ -52,6 +52,16 @@ class Verification:
     n_matches: int = 0
     n_inliers: int = 0
 
+    @property
+    def kind(self) -> str:
+        """The stage that rejected the candidate (for counting): features, matches, ransac, refinement."""
+        if self.constraint is not None:
+            return "ok"
+        for key in ("features", "matches", "RANSAC", "refinement"):
+            if key in self.reason:
+                return key.lower()
+        return "other"
+
 
 def match_by_nodes(q_desc: np.ndarray, q_nodes: np.ndarray, r_desc: np.ndarray, r_nodes: np.ndarray,
                    max_hamming: int, ratio: float):

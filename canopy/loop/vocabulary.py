@@ -31,3 +31,15 @@ def load_vocabulary(path: str | Path | None = None):
         except AttributeError:
             pass
     return voc
+
+
+def check_vocabulary(path: str | Path | None = None) -> Path:
+    """The vocabulary file loop closing will load, or a ConfigError saying what is missing."""
+    path = Path(path) if path else default_vocabulary_path()
+    if not path.is_file():
+        raise ConfigError(path, "vocabulary file not found (loop.vocabulary)")
+    try:
+        import canopy.place.vocabulary  # noqa: F401
+    except ImportError:
+        raise ConfigError(path, "this build has no vocabulary loader (canopy.place.vocabulary); run with --no-loop") from None
+    return path
