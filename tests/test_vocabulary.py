@@ -168,6 +168,13 @@ def test_bad_input_gets_a_clear_error(tmp_path, small_trained):
     (tmp_path / "bad.txt").write_text("\n".join(lines))
     with pytest.raises(InputError, match="node line 6 has 32 fields"):
         Vocabulary.load(tmp_path / "bad.txt")
+    lines = (tmp_path / "v.txt").read_text().split("\n")
+    fields = lines[5].split()
+    fields[3] = "x"
+    lines[5] = " ".join(fields)
+    (tmp_path / "word.txt").write_text("\n".join(lines))
+    with pytest.raises(InputError, match="node line 6 has a non-numeric field"):
+        Vocabulary.load(tmp_path / "word.txt")
     (tmp_path / "head.txt").write_text("10 99 0 0\n0 1 " + " ".join(["0"] * 32) + " 1.0")
     with pytest.raises(InputError, match="header out of range"):
         Vocabulary.load(tmp_path / "head.txt")
