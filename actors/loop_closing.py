@@ -13,7 +13,8 @@ import time
 import numpy as np
 
 from actors.runtime import Actor, ActorContext
-from canopy.loop import LoopCloser, PlaceKeyframe, with_bow
+from canopy.loop.closer import LoopCloser
+from canopy.loop.keyframe import PlaceKeyframe, with_bow
 from canopy.loop.database import FeatureStats
 from canopy.loop.vocabulary import load_vocabulary
 from protocol.messages import EndOfStream, LoopKeyframe, LoopResult

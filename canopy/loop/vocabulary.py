@@ -11,8 +11,9 @@ VOCABULARY_DIR = REPO_ROOT / "data" / "vocabulary"
 
 
 def default_vocabulary_path() -> Path:
-    """The shipped ORB vocabulary: the one file in data/vocabulary/ whose name starts with 'orb'."""
-    found = sorted(p for p in VOCABULARY_DIR.glob("orb*") if p.is_file())
+    """The shipped ORB vocabulary: the DBoW2 file in data/vocabulary/ whose name starts with
+    'orb' (the .json beside it describes how it was trained)."""
+    found = sorted(p for p in VOCABULARY_DIR.glob("orb*") if p.is_file() and p.suffix != ".json")
     if not found:
         raise ConfigError(VOCABULARY_DIR, "no ORB vocabulary (orb*) shipped here; set loop.vocabulary in the config")
     return found[0]
