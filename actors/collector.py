@@ -121,13 +121,16 @@ class RunCollector:
         return Trajectory(self.snapshot.keyframe_stamps[order], self.snapshot.keyframe_poses[order])
 
     def camera_trajectory(self) -> Trajectory:
-        """Every frame's pose, re-expressed through its (possibly corrected) reference keyframe."""
+        """Every tracked frame's pose, re-expressed through its (possibly corrected) reference
+        keyframe; lost frames have no pose and are left out."""
         corrected: dict[int, np.ndarray] = {}
         if self.snapshot is not None:
             corrected = {int(i): T for i, T in zip(self.snapshot.keyframe_indices, self.snapshot.keyframe_poses)}
         stamps, poses = [], []
         for idx in sorted(self.poses):
             p = self.poses[idx]
+            if p.status == "lost":  # no pose was estimated: not written as a made-up one (issue 10)
+                continue
             T_w_ref = corrected.get(int(p.ref_keyframe))
             poses.append(T_w_ref @ p.T_ref_cam if T_w_ref is not None else p.T_world_cam)
             stamps.append(p.timestamp)

@@ -69,6 +69,8 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin):
         # motion state
         self._initialised = False
         self._need_restart = False
+        self._lost_streak = 0                       # frames lost in a row (relocalisation bridge)
+        self._bridge_velocity = np.eye(4)           # per-frame motion when tracking was lost
         self._T_last = self._initial_pose.copy()    # T_world_cam of the last good frame
         self._velocity = np.eye(4)                  # T_last-1_last (constant-velocity model)
         self._last_points_w: np.ndarray | None = None  # last frame's stereo points (fallback)
@@ -189,7 +191,9 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin):
             timings["lines_wait"] = _ms(t0)  # what the worker's detection + LBD cost beyond ORB/stereo
             timings["lines_detect_worker"] = lines.stats["detect_ms"]
             timings["lines_describe_worker"] = lines.stats["describe_ms"]
-        if not self._initialised or self._need_restart:
+        if self._need_restart and 0 < self._lost_streak <= self.params.relocalise_bridge_frames:
+            res = self._relocalise(frame, left, stereo, timings, lines)
+        elif not self._initialised or self._need_restart:
             res = self._initialise(frame, left, stereo, n_stereo, lines)
         else:
             res = self._track_frame(frame, left, stereo, timings, lines)
@@ -202,17 +206,39 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin):
         res.timings = timings
         return res
 
+    # ------------------------------------------------------------------ relocalisation
+    def _relocalise(self, frame: StereoFrame, feats: Features, stereo: StereoMatches, timings,
+                    lines: LineFrame | None = None) -> TrackingResult:
+        """Track a frame after a loss against the same local map: the motion model bridges the
+        lost frames (prediction T_last V^(k+1) after k lost frames), and ``_track_frame`` falls
+        back to appearance matching against the map view when the prediction finds too little.
+        Success joins the existing map (no new segment)."""
+        k = self._lost_streak
+        self._velocity = np.linalg.matrix_power(self._bridge_velocity, k + 1)
+        self._need_restart = False
+        res = self._track_frame(frame, feats, stereo, timings, lines)
+        if res.status == STATUS_LOST:
+            self._lost_streak = k + 1  # _track_frame asked for a restart again
+            return res
+        self._lost_streak = 0
+        self._velocity = self._bridge_velocity.copy()
+        res.keyframe_reason = "+".join(filter(None, [res.keyframe_reason, "relocalised"]))
+        return res
+
     # ------------------------------------------------------------------ (re)initialisation
     def _initialise(self, frame: StereoFrame, feats: Features, stereo: StereoMatches, n_stereo: int,
                     lines: LineFrame | None = None) -> TrackingResult:
         T_wc = self._T_last.copy()  # first frame: initial pose; restart: last good pose
         if n_stereo < self.params.min_init_points:
             self.n_lost += 1
+            if self._initialised:
+                self._lost_streak += 1
             return TrackingResult(frame.index, frame.timestamp, T_wc, STATUS_LOST, 0, 0, False, None,
                                   self._ref_kf)
         restart = True
         self._initialised = True
         self._need_restart = False
+        self._lost_streak = 0
         self._velocity = np.eye(4)
         # a new map segment: forget the old view (its landmarks are not connected to this one)
         self._update_view.set(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 32), np.uint8))
@@ -334,6 +360,9 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin):
         if not ok:
             self.n_lost += 1
             self._need_restart = True
+            if self._lost_streak == 0:  # first lost frame: keep the motion for the bridge
+                self._bridge_velocity = self._velocity.copy()
+                self._lost_streak = 1
             self._velocity = np.eye(4)
             self._seen = []
             return TrackingResult(frame.index, frame.timestamp, self._T_last.copy(), STATUS_LOST,

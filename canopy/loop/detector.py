@@ -79,6 +79,7 @@ class LoopDetector:
         self.keyframes: dict[int, PlaceKeyframe] = {}
         self.covisibility = Covisibility()
         self._order: list[int] = []
+        self._path: dict[int, float] = {}   # distance travelled up to each keyframe (m)
         self._last_loop_order = -10**9
         self._consistent_groups: list[tuple[set[int], int]] = []  # (group, consecutive count)
         self.stats = DetectionStats()
@@ -91,6 +92,11 @@ class LoopDetector:
         p = self.params
         self.keyframes[kf.index] = kf
         self.covisibility.add(kf.index, kf.landmark_ids)
+        if self._order:
+            prev = self.keyframes[self._order[-1]].T_world_cam
+            self._path[kf.index] = self._path[self._order[-1]] + float(np.linalg.norm(kf.T_world_cam[:3, 3] - prev[:3, 3]))
+        else:
+            self._path[kf.index] = 0.0
         self._order.append(kf.index)
         self.stats.keyframes += 1
         constraint = None
@@ -110,6 +116,8 @@ class LoopDetector:
         min_score = min(self.database.score_with(kf.bow, kf.line_bow, kf.stats, k) for k in neighbours
                         if k in self.database) if any(k in self.database for k in neighbours) else 0.0
         recent = set(self._order[-p.exclude_recent_keyframes - 1:])
+        here = self._path[kf.index]
+        recent |= {k for k in self._order if here - self._path[k] < p.min_loop_path_m}
         exclude = set(neighbours) | recent | {kf.index}
         cands = self.database.query(kf.bow, kf.line_bow, kf.stats, exclude=exclude, min_score=min_score,
                                     min_common_words_ratio=p.min_common_words_ratio)

@@ -23,6 +23,9 @@ class LoopParams:
     # --- detection (ORB-SLAM DetectLoopCandidates) ------------------------------------------
     min_keyframes_since_loop: int = 10    # no detection right after a loop or at the start
     exclude_recent_keyframes: int = 20    # the latest keyframes are the same place, not a revisit
+    # ... nor is a view a few metres back along the path: a loop is a return after driving away
+    # (the generated orchard, 1.6 m/s, matches views 3 m apart in one lane with 5 cm errors)
+    min_loop_path_m: float = 10.0
     covisibility_min_shared: int = 15     # landmarks two keyframes share to be covisible
     group_size: int = 10                  # best covisible neighbours forming a candidate's group
     min_common_words_ratio: float = 0.8   # of the best candidate's words shared with the query
@@ -75,6 +78,7 @@ class LoopParams:
                 raise ConfigError("LoopParams", f"{name} {what} (got {getattr(self, name)!r})")
 
         need(self.min_keyframes_since_loop >= 0, "min_keyframes_since_loop", "must be >= 0")
+        need(self.min_loop_path_m >= 0, "min_loop_path_m", "must be >= 0")
         need(self.exclude_recent_keyframes >= 0, "exclude_recent_keyframes", "must be >= 0")
         need(self.covisibility_min_shared >= 1, "covisibility_min_shared", "must be >= 1")
         need(self.group_size >= 1, "group_size", "must be >= 1")
