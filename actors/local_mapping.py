@@ -109,5 +109,8 @@ class LocalMappingActor(Actor):
 
     def teardown(self, ctx: ActorContext) -> None:
         self._publish_snapshot(ctx, final=True)
+        if self.config.get("save_map"):  # --save-map: the final (loop-corrected) map, versioned msgpack
+            from canopy.loop.map_io import map_from_mapper, save_map
+            save_map(self.config["save_map"], map_from_mapper(self.mapper, self.config.get("vocabulary_id", "")))
         if ctx.has_output("recorder"):  # after the final map: the recorder's second end-of-stream
             ctx.send("recorder", EndOfStream(n_frames=self.n_keyframes, sent_at=time.time()), block=False)

@@ -62,7 +62,7 @@ def default_out_dir(dataset: str) -> Path:
 
 def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_frames: int | None,
                       rings: dict[str, str], calib, frame_rate_hz: float,
-                      record: str | None = None) -> list[ActorSpec]:
+                      record: str | None = None, save_map: str | None = None) -> list[ActorSpec]:
     ep = {name: Supervisor.endpoints(run_dir, name)
           for name in ("source", "enhancement", "tracking", "local_mapping", "loop_closing", "recorder")}
     to_recorder = ["recorder"] if record else []
@@ -90,7 +90,9 @@ def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_fra
              ["local_mapping", "source", *to_recorder]),
         spec("local_mapping", "actors.local_mapping:LocalMappingActor",
              {"calib": calib, "params": cfg.mapping, "snapshot_period_s": rt.map_snapshot_period_s,
-              "lockstep_wait_s": rt.lockstep_wait_s},
+              "lockstep_wait_s": rt.lockstep_wait_s, "save_map": save_map,
+              "vocabulary_id": Path(cfg.loop.vocabulary).name if loop_on and cfg.loop.vocabulary else
+              ("default" if loop_on else "")},
              ["tracking", *to_recorder, *to_loop]),
     ] + ([spec("loop_closing", "actors.loop_closing:LoopClosingActor", {"calib": calib, "params": cfg.loop},
                ["local_mapping"])] if loop_on else []) + ([spec("recorder", "actors.recorder:RecorderActor",
@@ -102,7 +104,7 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
              clock: str | None = None, max_frames: int | None = None, enhance: str | None = None,
              inspect: str | None = None, progress: bool = True, preset: str | None = None,
              seed: int = 0, lines: bool | None = None, record: str | None = None,
-             loop: bool | None = None) -> RunResult:
+             loop: bool | None = None, save_map: str | None = None) -> RunResult:
     if dataset not in DATASETS:
         from shared.errors import ConfigError
         raise ConfigError("--dataset", f"unknown dataset {dataset!r}; choose one of {DATASETS}")
@@ -127,8 +129,9 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
     run_dir = Supervisor.make_run_dir()
     tag = f"canopy_{os.getpid()}_{int(time.time() * 1000) % 100000}"
     rings = {"raw": f"{tag}_raw", "enhanced": f"{tag}_enh"}
+    save_map_path = str(Path(save_map).resolve()) if save_map else None
     specs = build_actor_specs(run_dir, cfg, dataset_kind, path, max_frames, rings, calib, source.rate_hz,
-                              record=record_path)
+                              record=record_path, save_map=save_map_path)
     collector = RunCollector(n_frames=len(source), progress=progress)
     supervisor = Supervisor(
         specs, [RingSpec(rings["raw"], cfg.runtime.ring_slots, calib.height, calib.width),
@@ -151,6 +154,8 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
     summary = collector.write_outputs(out_dir, source.ground_truth, run_info)
     if record_path and Path(record_path).is_file():
         summary["files"]["recording"] = record_path
+    if save_map_path and Path(save_map_path).is_file():
+        summary["files"]["map"] = save_map_path
     _write_config(out_dir, cfg)
     text = format_summary(summary, outcome.reason, os.cpu_count() or 1)
     return RunResult(outcome=outcome, summary=summary, out_dir=out_dir, text=text)

@@ -30,8 +30,12 @@ def test_no_false_loop_on_real_snippets(vocabulary, kind, frames):
 def test_actor_run_with_loop_closer_reports_loops(tmp_path):
     from canopy.app import run_slam
 
-    result = run_slam("kitti", out=str(tmp_path / "run"), max_frames=25, progress=False, loop=True)
+    result = run_slam("kitti", out=str(tmp_path / "run"), max_frames=25, progress=False, loop=True,
+                      save_map=str(tmp_path / "map.canopy"))
     assert result.outcome.ok, result.outcome.reason
+    from canopy.loop.map_io import load_map
+    saved = load_map(tmp_path / "map.canopy", open_source("kitti").calibration)
+    assert result.summary["files"]["map"] == str(tmp_path / "map.canopy")
     metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
     stats = json.loads((tmp_path / "run" / "stats.json").read_text())
     assert metrics["loops"]["closed"] == 0
@@ -39,6 +43,7 @@ def test_actor_run_with_loop_closer_reports_loops(tmp_path):
     assert "loops closed         0" in result.text
     assert "loop_candidate" in (tmp_path / "run" / "frames.csv").read_text().splitlines()[0]
     assert metrics["ate"]["rmse"] < 0.5
+    assert len(saved.kf_index) == metrics["tracking"]["keyframes"] and len(saved.lm_id) == metrics["map_points"]
 
 
 def test_frames_after_a_blank_gap_relocalise_into_the_same_map(tmp_path):
