@@ -206,3 +206,21 @@ def test_generated_revisit_verified_with_exact_relative_pose(day_loop_views):
     assert np.degrees(rotation_angle(E[:3, :3])) < 0.2
     for other in (300, 600):  # other rows: look alike, are not the place
         assert verify_candidate(views[revisit], views[other], gen.calibration, LoopParams()).constraint is None
+
+
+def test_generated_revisit_is_the_best_database_match(day_loop_views):
+    """Place recognition with the shipped vocabulary: of the stored views, the revisit's
+    best-scoring keyframe is the place it revisits, well above the look-alike rows."""
+    from canopy.loop import with_bow
+    from canopy.loop.vocabulary import load_vocabulary
+
+    gen, revisit, views = day_loop_views
+    voc = load_vocabulary()
+    db = KeyframeDatabase()
+    for i in (5, 300, 600):
+        kf = with_bow(views[i], voc)
+        db.add(i, kf.bow, stats=kf.stats)
+    q = with_bow(views[revisit], voc)
+    res = db.query(q.bow, stats=q.stats)
+    assert res[0].keyframe == 5
+    assert res[0].score > 1.5 * max(c.score for c in res[1:])
