@@ -164,6 +164,9 @@ class KeyframeData:
     line_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))                    # (K,) -1: none
     new_line_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))                # (K,) -1: none
     line_endpoints_cam: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))            # (K,2,3) NaN: none
+    # loop corrections tracking had applied when it tracked this keyframe (issue 10): local
+    # mapping brings a keyframe tracked before a correction reached tracking up to date
+    loop_epoch: int = 0
 
     def __len__(self) -> int:
         return len(self.uv)
@@ -187,6 +190,7 @@ class LocalMapUpdate:
     line_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))              # (L,)
     line_endpoints: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))          # (L,2,3)
     line_descriptors: np.ndarray = field(default_factory=lambda: np.zeros((0, 32), np.uint8))  # (L,32)
+    loop_epoch: int = 0          # loop corrections applied to the map so far (issue 10)
 
     def __len__(self) -> int:
         return len(self.landmark_ids)

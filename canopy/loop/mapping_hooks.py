@@ -32,3 +32,17 @@ def apply_loop_result(mapper, result: LoopResult, update: LocalMapUpdate | None)
     if update is not None:
         refresh_update(mapper, update)
     return True
+
+
+def catch_up_pose(index: int, T_world_cam: np.ndarray, epoch_corrections: dict[int, dict], from_epoch: int,
+                  to_epoch: int) -> np.ndarray:
+    """The pose of a keyframe tracking computed before loop corrections ``from_epoch+1 ..
+    to_epoch`` reached it, moved by each of them (its own or its nearest older keyframe's)."""
+    from canopy.loop.pose_graph import correction_for
+
+    T = np.asarray(T_world_cam, float)
+    for e in range(from_epoch + 1, to_epoch + 1):
+        corr = epoch_corrections.get(e)
+        if corr:
+            T = correction_for(int(index), corr) @ T
+    return T

@@ -1,9 +1,10 @@
 """In-process lockstep reference of tracking -> local mapping -> loop closing.
 
-``canopy.pipeline.run_sequential`` plus the loop closer after every keyframe, in the order
-the actors follow in lockstep: local mapping inserts the keyframe, hands it to the loop
-closer and waits for its answer; a closed loop corrects the map before the local-map
-update goes back to tracking. For tests and benchmarks of loop closing without processes.
+``canopy.pipeline.run_sequential`` plus the loop closer after every keyframe, with no
+latency: local mapping inserts the keyframe, the loop closer answers at once, and a closed
+loop corrects the map before the local-map update goes back to tracking (the actors apply
+the answer whenever it arrives, usually within a keyframe or two). For tests and
+benchmarks of loop closing without processes.
 """
 from __future__ import annotations
 
