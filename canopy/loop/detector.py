@@ -119,7 +119,8 @@ class LoopDetector:
         here = self._path[kf.index]
         recent |= {k for k in self._order if here - self._path[k] < p.min_loop_path_m}
         exclude = set(neighbours) | recent | {kf.index}
-        cands = self.database.query(kf.bow, kf.line_bow, kf.stats, exclude=exclude, min_score=min_score,
+        cands = self.database.query(kf.bow, kf.line_bow, kf.stats, exclude=exclude,
+                                    min_score=p.min_score_factor * min_score,
                                     min_common_words_ratio=p.min_common_words_ratio)
         if not cands:
             return []

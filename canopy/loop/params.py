@@ -28,6 +28,10 @@ class LoopParams:
     min_loop_path_m: float = 10.0
     covisibility_min_shared: int = 15     # landmarks two keyframes share to be covisible
     group_size: int = 10                  # best covisible neighbours forming a candidate's group
+    # a candidate must score >= this x the lowest score of the query's covisible neighbours
+    # (ORB-SLAM: 1). Below 1 lets a revisit under other light through: at dusk the true place
+    # scores ~0.27, about as low as the dark neighbours themselves.
+    min_score_factor: float = 1.0
     min_common_words_ratio: float = 0.8   # of the best candidate's words shared with the query
     group_score_ratio: float = 0.75       # of the best accumulated group score
     consistency_keyframes: int = 3        # consecutive keyframes a candidate group must persist
@@ -81,6 +85,7 @@ class LoopParams:
         need(self.min_loop_path_m >= 0, "min_loop_path_m", "must be >= 0")
         need(self.exclude_recent_keyframes >= 0, "exclude_recent_keyframes", "must be >= 0")
         need(self.covisibility_min_shared >= 1, "covisibility_min_shared", "must be >= 1")
+        need(0 < self.min_score_factor <= 1, "min_score_factor", "must be in (0, 1]")
         need(self.group_size >= 1, "group_size", "must be >= 1")
         need(0 < self.min_common_words_ratio <= 1, "min_common_words_ratio", "must be in (0, 1]")
         need(0 < self.group_score_ratio <= 1, "group_score_ratio", "must be in (0, 1]")
