@@ -62,6 +62,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lines", action=argparse.BooleanOptionalAction, default=None,
                    help="track and bundle-adjust line segments (FLD + LBD) as well as ORB points "
                         "(default from the config: off)")
+    p.add_argument("--loop", action=argparse.BooleanOptionalAction, default=None,
+                   help="loop closing: place recognition, pose-graph correction (default from the config: on)")
+    p.add_argument("--save-map", default=None, metavar="PATH",
+                   help="write the final map (keyframes, landmarks, descriptors, covisibility) to PATH "
+                        "(versioned msgpack, canopy.loop.map_io)")
     p.add_argument("--inspect", default=None, metavar="ENDPOINT",
                    help="publish every event on this ZeroMQ endpoint for remote clients and answer "
                         "requests on the next port, e.g. tcp://127.0.0.1:5560 (see tools/watch_run.py); "
@@ -90,7 +95,8 @@ def main(argv: list[str] | None = None) -> int:
         result = run_slam(args.dataset, path=args.path, config=args.config, out=args.out, clock=args.clock,
                           max_frames=args.max_frames, enhance=args.enhance, inspect=args.inspect,
                           progress=not args.quiet, preset=args.preset, seed=args.seed, lines=args.lines,
-                          record=args.record, inspect_keys=args.inspect_keys)
+                          record=args.record, inspect_keys=args.inspect_keys, loop=args.loop,
+                          save_map=args.save_map)
     except CanopyError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -27,16 +27,19 @@ import numpy as np
 from canopy.metrics import evaluate_trajectory
 from canopy.report import plot_trajectory_png, write_json, write_ply_lines, write_ply_points
 from canopy.trajectory_io import POSE_DECIMALS, TUM_TIME_DECIMALS, write_tum
-from protocol.messages import ActorError, ActorStats, FramePose, MapSnapshot
+from protocol.messages import ActorError, ActorStats, FramePose, LoopResult, MapSnapshot
 from shared.geometry import rot_to_quat_wxyz
 from shared.types import Trajectory
 
 TUM_HEADER = "# timestamp tx ty tz qx qy qz qw"
 FRAMES_COLUMNS = ["index", "timestamp", "status", "reason", "keyframe", "inliers", "matches", "enhance_method",
                   "mean_in", "mean_out", "enhance_ms", "orb_ms", "stereo_ms", "tracking_ms", "lines",
-                  "line_inliers"]
+                  "line_inliers", "loop_candidate"]
 # Statuses of frames that have an estimated pose (a "lost" frame's T_world_cam is a placeholder).
-POSED_STATUSES = ("init", "ok")
+# "predicted": the tracker rejected its measurement and bridged with the motion model for a frame
+# or two (written, since it is an estimate, but not counted as tracked).
+POSED_STATUSES = ("init", "ok", "predicted")
+TRACKED_STATUSES = ("init", "ok")
 # Frames with no FramePose at all: skipped to keep up with the clock, or never reached.
 STATUS_DROPPED, STATUS_NOT_REACHED = "dropped", "not_reached"
 REASON_LOST_DEFAULT = "tracking lost"
@@ -59,14 +62,14 @@ def _num(v) -> str:
     return "" if v is None else f"{float(v):.3f}"
 
 
-def frame_row(p: FramePose) -> str:
+def frame_row(p: FramePose, loop_candidate: int | None = None) -> str:
     e, t = p.enhancement, p.timings_ms
-    reason = "" if has_pose(p) else (getattr(p, "reason", "") or REASON_LOST_DEFAULT)
+    reason = getattr(p, "lost_reason", "") or ("" if has_pose(p) else REASON_LOST_DEFAULT)
     return ",".join([str(p.index), f"{p.timestamp:.9f}", p.status, _csv_text(reason), str(int(p.is_keyframe)),
                      str(p.n_inliers), str(p.n_matches), _csv_text(str(e.get("method", ""))),
                      _num(e.get("mean_in")), _num(e.get("mean_out")), _num(t.get("enhance")),
                      _num(t.get("orb")), _num(t.get("stereo")), _num(t.get("total")),
-                     str(p.n_lines), str(p.n_line_inliers)])
+                     str(p.n_lines), str(p.n_line_inliers), "" if loop_candidate is None else str(loop_candidate)])
 
 
 def missing_row(index: int, stamp: float | None, status: str, reason: str) -> str:
@@ -154,6 +157,7 @@ class RunCollector:
         self.snapshot: MapSnapshot | None = None
         self.actors: dict[str, ActorRecord] = {}
         self.errors: list[ActorError] = []
+        self.loops: list[LoopResult] = []  # closed loops, in the order the loop closer found them
         self.progress = progress
         self.stream = stream
         self._last_print = 0.0
@@ -184,6 +188,8 @@ class RunCollector:
             rec.extra.update(msg.extra)
         elif isinstance(msg, ActorError):
             self.errors.append(msg)
+        elif isinstance(msg, LoopResult) and msg.closed:
+            self.loops.append(msg)
 
     def _print_progress(self, force: bool = False) -> None:
         now = time.monotonic()
@@ -235,10 +241,11 @@ class RunCollector:
         and for a frame without a pose, why (lost / dropped / not reached)."""
         rows = [",".join(FRAMES_COLUMNS)]
         last = max(self.poses, default=-1)
+        loop_at = {int(lp.keyframe_index): int(lp.candidate) for lp in self.loops}  # keyframe closing a loop -> place
         for idx in range(max(self.n_frames, last + 1)):
             p = self.poses.get(idx)
             if p is not None:
-                rows.append(frame_row(p))
+                rows.append(frame_row(p, loop_at.get(idx)))
                 continue
             stamp = float(self.frame_stamps[idx]) if self.frame_stamps is not None and idx < len(
                 self.frame_stamps) else None
@@ -257,10 +264,10 @@ class RunCollector:
         rows = self.frame_rows(run_ended_early)[1:]
         status = [r.split(",", 3)[2] for r in rows]
         total = max(self.n_frames, len(rows))
-        tracked = sum(s in POSED_STATUSES for s in status)
+        tracked = sum(s in TRACKED_STATUSES for s in status)
         n = len(self.poses)
         return {"frames_total": total, "frames_processed": n, "frames_tracked": tracked,
-                "frames_lost": n - tracked, "frames_dropped": status.count(STATUS_DROPPED),
+                "frames_predicted": status.count("predicted"), "frames_lost": status.count("lost"), "frames_dropped": status.count(STATUS_DROPPED),
                 "frames_not_reached": status.count(STATUS_NOT_REACHED),
                 "keyframes": int(sum(p.is_keyframe for p in self.poses.values())),
                 "tracking_success_percent": 100.0 * tracked / total if total else 0.0,
@@ -295,6 +302,9 @@ class RunCollector:
         metrics["map_points"] = int(len(points))
         metrics["map_lines"] = int(len(lines))
         metrics["run"] = run_info
+        metrics["loops"] = {"closed": len(self.loops),
+                            "pairs": [{"keyframe": int(lp.keyframe_index), "candidate": int(lp.candidate),
+                                       "inliers": int(lp.n_inliers)} for lp in self.loops]}
         files["metrics"] = str(write_json(out_dir / "metrics.json", metrics))
         stats = self.stats_summary()
         files["stats"] = str(write_json(out_dir / "stats.json", stats))
@@ -321,6 +331,9 @@ def format_summary(summary: dict, outcome_reason: str, n_cores: int) -> str:
     ate = m.get("ate")
     if ate and ate.get("rmse") is not None:
         lines.append(f"  ATE (SE3-aligned)    rmse {ate['rmse']:.4f} m   max {ate['max']:.4f} m   (n={ate['n']})")
+    sim3 = m.get("ate_sim3")
+    if sim3 and sim3.get("rmse") is not None and (m.get("run") or {}).get("sensor") == "mono":
+        lines.append(f"  ATE (Sim3-aligned)   rmse {sim3['rmse']:.4f} m   scale {sim3.get('scale', float('nan')):.4f}")
     rpe_f = m.get("rpe_frame")
     if rpe_f and rpe_f.get("rmse") is not None:
         lines.append(f"  RPE per frame        rmse {rpe_f['rmse']:.4f} m   rot {rpe_f.get('rot_rmse', float('nan')):.3f} deg")
@@ -335,6 +348,9 @@ def format_summary(summary: dict, outcome_reason: str, n_cores: int) -> str:
     if em:
         lines.append(f"  estimated motion     {em['translation_m']:.4f} m, {em['rotation_deg']:.3f} deg "
                      f"(path {em['path_length_m']:.3f} m)")
+    loops = m.get("loops") or {}
+    if "loop_closing" in (m.get("run") or {}) or loops.get("closed"):
+        lines.append(f"  loops closed         {loops.get('closed', 0)}")
     if m.get("note"):
         lines.append(f"  note                 {m['note']}")
     errors = (m.get("run") or {}).get("errors") or []

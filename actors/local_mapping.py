@@ -5,6 +5,16 @@ A thin loop around ``canopy.backend.LocalMapper``, which owns the map
 the supervisor gets a snapshot of keyframe poses and map points at most
 every ``snapshot_period_s`` and always at the end, so a crash elsewhere
 still leaves the map computed so far.
+
+With loop closing on, each inserted keyframe also goes to the loop closer;
+its answers are applied whenever they arrive (never waited for, so the loop
+closer adds nothing to tracking's wait for map updates) and the corrected
+local map goes to tracking then. Each correction is an epoch: a keyframe
+tracking computed before a correction reached it carries the older epoch
+and is brought up to date on insertion. Runs without a loop stay
+repeatable in lockstep; when a loop closes, the keyframe at which its
+correction lands may vary by one or two between runs. At the end the loop
+closer is drained before the final map is published.
 """
 from __future__ import annotations
 
@@ -14,7 +24,9 @@ import numpy as np
 
 from actors.runtime import Actor, ActorContext
 from canopy.backend import LocalMapper
-from protocol.messages import EndOfStream, KeyframeData, MapSnapshot
+from canopy.loop.correction import corrections_from_arrays
+from canopy.loop.mapping_hooks import apply_loop_result, catch_up_pose, loop_keyframe_message
+from protocol.messages import EndOfStream, KeyframeData, LoopResult, MapSnapshot
 
 
 class LocalMappingActor(Actor):
@@ -25,19 +37,58 @@ class LocalMappingActor(Actor):
         self.snapshot_period = float(self.config.get("snapshot_period_s", 0.5))
         self.last_snapshot = 0.0
         self.n_keyframes = 0
+        self.loop_on = ctx.has_output("loop_closing")
+        self.loop_wait_s = float(self.config.get("lockstep_wait_s", 60.0))
+        self.last_update = None
+        self.loops = 0
+        self.loop_epoch = 0                      # loop corrections applied to the map
+        self.epoch_corrections: dict[int, dict] = {}  # epoch -> keyframe corrections of that loop
 
     def on_message(self, msg, ctx: ActorContext) -> None:
         if isinstance(msg, KeyframeData):
+            if msg.loop_epoch < self.loop_epoch:  # tracked before the latest correction reached tracking
+                msg.T_world_cam = catch_up_pose(msg.index, msg.T_world_cam, self.epoch_corrections,
+                                                msg.loop_epoch, self.loop_epoch)
             update = self.mapper.insert_keyframe(msg)
             self.n_keyframes += 1
+            if self.loop_on:
+                ctx.send("loop_closing", loop_keyframe_message(msg, self.mapper, update))
+            self.last_update = update
+            update.loop_epoch = self.loop_epoch
             # Tracking may already have finished at the end of a realtime run: never block on it.
             ctx.send("tracking", update, block=False)
             ctx.extra.update({"keyframes": self.n_keyframes, "landmarks": len(self.mapper.landmarks),
                               **{f"{k}_ms": float(v) for k, v in update.timings.items()}})
             if time.monotonic() - self.last_snapshot >= self.snapshot_period:
                 self._publish_snapshot(ctx, final=False)
+        elif isinstance(msg, LoopResult):  # a correction arriving between keyframes
+            if self._on_loop_result(msg, self.last_update) and self.last_update is not None:
+                self.last_update.loop_epoch = self.loop_epoch
+                ctx.send("tracking", self.last_update, block=False)
         elif isinstance(msg, EndOfStream):
+            if self.loop_on:
+                self._drain_loop_closer(msg, ctx)
             ctx.stop()
+
+    def _on_loop_result(self, result: LoopResult, update) -> bool:
+        changed = apply_loop_result(self.mapper, result, update)
+        self.loops = max(self.loops, int(result.loops))
+        if changed:
+            self.loop_epoch += 1
+            self.epoch_corrections[self.loop_epoch] = corrections_from_arrays(result.keyframe_ids, result.corrections)
+        return changed
+
+    def _drain_loop_closer(self, end: EndOfStream, ctx: ActorContext) -> None:
+        """Forward the end of stream and apply the loop closer's remaining answers until it
+        ends too, so that the final map carries every correction."""
+        ctx.send("loop_closing", EndOfStream(n_frames=end.n_frames, sent_at=time.time()), block=False)
+        deadline = time.monotonic() + self.loop_wait_s
+        while time.monotonic() < deadline:
+            msg = ctx.recv_inbox(100)
+            if isinstance(msg, LoopResult):
+                self._on_loop_result(msg, None)
+            elif isinstance(msg, EndOfStream):
+                return
 
     def _snapshot(self, final: bool) -> MapSnapshot:
         self.last_snapshot = time.monotonic()
@@ -55,5 +106,8 @@ class LocalMappingActor(Actor):
 
     def teardown(self, ctx: ActorContext) -> None:
         self._publish_snapshot(ctx, final=True)
+        if self.config.get("save_map"):  # --save-map: the final (loop-corrected) map, versioned msgpack
+            from canopy.loop.map_io import map_from_mapper, save_map
+            save_map(self.config["save_map"], map_from_mapper(self.mapper, self.config.get("vocabulary_id", "")))
         if ctx.has_output("recorder"):  # after the final map: the recorder's second end-of-stream
             ctx.send("recorder", EndOfStream(n_frames=self.n_keyframes, sent_at=time.time()), block=False)

@@ -43,9 +43,11 @@ class TrackingActor(Actor):
         self.fast_omega = float(getattr(enh, "fast_omega", 128.0)) if enh is not None else 128.0
         self.fast_min_keypoints = int(getattr(enh, "min_keypoints", 0)) if enh is not None else 0
         self.counts = {"ok": 0, "lost": 0, "init": 0, "keyframes": 0}
+        self.loop_epoch = 0  # loop corrections received from local mapping
 
     def _apply_update(self, update: LocalMapUpdate) -> None:
         self.tracker.apply_map_update(update)
+        self.loop_epoch = max(self.loop_epoch, int(update.loop_epoch))
 
     def on_message(self, msg, ctx: ActorContext) -> None:
         if isinstance(msg, LocalMapUpdate):
@@ -86,6 +88,7 @@ class TrackingActor(Actor):
         self.counts[res.status] = self.counts.get(res.status, 0) + 1
         if res.is_keyframe:
             self.counts["keyframes"] += 1
+            res.keyframe.loop_epoch = self.loop_epoch
             ctx.send("local_mapping", res.keyframe)
             if self.lockstep:
                 self._wait_for_update(res.index, ctx)

@@ -62,10 +62,12 @@ def default_out_dir(dataset: str) -> Path:
 
 def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_frames: int | None,
                       rings: dict[str, str], calib, frame_rate_hz: float,
-                      record: str | None = None) -> list[ActorSpec]:
+                      record: str | None = None, save_map: str | None = None) -> list[ActorSpec]:
     ep = {name: Supervisor.endpoints(run_dir, name)
-          for name in ("source", "enhancement", "tracking", "local_mapping", "recorder")}
+          for name in ("source", "enhancement", "tracking", "local_mapping", "loop_closing", "recorder")}
     to_recorder = ["recorder"] if record else []
+    loop_on = cfg.loop is not None and cfg.loop.enabled
+    to_loop = ["loop_closing"] if loop_on else []
     events = f"ipc://{run_dir}/supervisor.events"
     rt = cfg.runtime
     # In realtime a frame older than max_lag_frames periods is skipped when a newer one waits.
@@ -87,9 +89,13 @@ def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_fra
               "enhancement": cfg.enhancement, "lockstep_wait_s": rt.lockstep_wait_s},
              ["local_mapping", "source", *to_recorder]),
         spec("local_mapping", "actors.local_mapping:LocalMappingActor",
-             {"calib": calib, "params": cfg.mapping, "snapshot_period_s": rt.map_snapshot_period_s},
-             ["tracking", *to_recorder]),
-    ] + ([spec("recorder", "actors.recorder:RecorderActor",
+             {"calib": calib, "params": cfg.mapping, "snapshot_period_s": rt.map_snapshot_period_s,
+              "lockstep_wait_s": rt.lockstep_wait_s, "save_map": save_map,
+              "vocabulary_id": Path(cfg.loop.vocabulary).name if loop_on and cfg.loop.vocabulary else
+              ("default" if loop_on else "")},
+             ["tracking", *to_recorder, *to_loop]),
+    ] + ([spec("loop_closing", "actors.loop_closing:LoopClosingActor", {"calib": calib, "params": cfg.loop},
+               ["local_mapping"])] if loop_on else []) + ([spec("recorder", "actors.recorder:RecorderActor",
                {"path": record, "ring": rings["enhanced"], "image_every": 1, "end_of_streams": 2}, [])]
          if record else [])
 
@@ -98,11 +104,15 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
              clock: str | None = None, max_frames: int | None = None, enhance: str | None = None,
              inspect: str | None = None, progress: bool = True, preset: str | None = None,
              seed: int = 0, lines: bool | None = None, record: str | None = None,
-             inspect_keys: str | None = None) -> RunResult:
+             inspect_keys: str | None = None, loop: bool | None = None,
+             save_map: str | None = None) -> RunResult:
     if dataset not in DATASETS:
         from shared.errors import ConfigError
         raise ConfigError("--dataset", f"unknown dataset {dataset!r}; choose one of {DATASETS}")
-    cfg = with_overrides(load_run_config(dataset, config), clock=clock, enhance=enhance, lines=lines)
+    cfg = with_overrides(load_run_config(dataset, config), clock=clock, enhance=enhance, lines=lines, loop=loop)
+    if cfg.loop is not None and cfg.loop.enabled:  # a missing vocabulary is an error before any process starts
+        from canopy.loop.vocabulary import check_vocabulary
+        check_vocabulary(cfg.loop.vocabulary)
     if dataset == "synthetic":
         # A generated sequence is written in the EuRoC ASL layout and read as such.
         if path is None:
@@ -127,8 +137,9 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
     run_dir = Supervisor.make_run_dir()
     tag = f"canopy_{os.getpid()}_{int(time.time() * 1000) % 100000}"
     rings = {"raw": f"{tag}_raw", "enhanced": f"{tag}_enh"}
+    save_map_path = str(Path(save_map).resolve()) if save_map else None
     specs = build_actor_specs(run_dir, cfg, dataset_kind, path, max_frames, rings, calib, source.rate_hz,
-                              record=record_path)
+                              record=record_path, save_map=save_map_path)
     # trajectory.tum and frames.csv grow as frames complete: a killed launcher still leaves them.
     collector = RunCollector(n_frames=len(source), progress=progress, out_dir=out_dir,
                              frame_stamps=source.timestamps)
@@ -162,6 +173,7 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
                 "enhancement": getattr(cfg.enhancement, "method", "none"), "config_file": cfg.source_file,
                 "lines": bool(cfg.tracking.use_lines), "recording": record_path,
                 "recording_repaired_messages": repaired,
+                "loop_closing": bool(cfg.loop is not None and cfg.loop.enabled),
                 "outcome": outcome.reason, "ok": outcome.ok, "wall_s": outcome.wall_s,
                 "frames_per_s": len(collector.poses) / outcome.wall_s if outcome.wall_s else None,
                 "failed_actor": outcome.failed_actor,
@@ -170,6 +182,8 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
     summary = collector.write_outputs(out_dir, source.ground_truth, run_info)
     if record_path and Path(record_path).is_file():
         summary["files"]["recording"] = record_path
+    if save_map_path and Path(save_map_path).is_file():
+        summary["files"]["map"] = save_map_path
     _write_config(out_dir, cfg)
     text = format_summary(summary, outcome.reason, os.cpu_count() or 1)
     return RunResult(outcome=outcome, summary=summary, out_dir=out_dir, text=text)
@@ -200,7 +214,8 @@ def prepare_out_dir(out_dir: Path) -> Path:
 
 def _config_dict(cfg) -> dict:
     return {"runtime": asdict(cfg.runtime), "enhancement": asdict(cfg.enhancement),
-            "tracking": asdict(cfg.tracking), "mapping": asdict(cfg.mapping)}
+            "tracking": asdict(cfg.tracking), "mapping": asdict(cfg.mapping),
+            **({"loop": asdict(cfg.loop)} if cfg.loop is not None else {})}
 
 
 def _write_config(out_dir: Path, cfg) -> None:

@@ -61,6 +61,7 @@ class RunConfig:
     tracking: object
     mapping: object
     source_file: str
+    loop: object = None              # canopy.loop.LoopParams (section ``loop``; issue 10)
 
 
 def default_config_path(dataset: str) -> Path:
@@ -71,10 +72,11 @@ def load_run_config(dataset: str, config_path: str | Path | None = None) -> RunC
     from canopy.backend import MappingParams
     from canopy.enhance import EnhanceParams
     from canopy.frontend import TrackingParams
+    from canopy.loop.params import LoopParams
 
     path = Path(config_path) if config_path else default_config_path(dataset)
     raw = load_yaml(path)
-    known = {"runtime", "enhancement", "tracking", "mapping"}
+    known = {"runtime", "enhancement", "tracking", "mapping", "loop"}
     unknown = sorted(set(raw) - known)
     if unknown:
         raise ConfigError(path, f"unknown section(s) {unknown}; expected {sorted(known)}")
@@ -90,11 +92,14 @@ def load_run_config(dataset: str, config_path: str | Path | None = None) -> RunC
         tracking=params_from_mapping(TrackingParams, raw.get("tracking"), src),
         mapping=params_from_mapping(MappingParams, raw.get("mapping"), src),
         source_file=src,
+        loop=params_from_mapping(LoopParams, raw.get("loop"), src),
     )
 
 
 def with_overrides(cfg: RunConfig, clock: str | None = None, enhance: str | None = None,
-                   lines: bool | None = None) -> RunConfig:
+                   lines: bool | None = None, loop: bool | None = None) -> RunConfig:
+    if loop is not None and cfg.loop is not None:
+        cfg = replace(cfg, loop=replace(cfg.loop, enabled=loop))
     runtime = cfg.runtime if clock is None else replace(cfg.runtime, clock=clock)
     if lines is not None:  # points + lines needs both tracking and local BA to agree
         cfg = replace(cfg, tracking=replace(cfg.tracking, use_lines=lines),

@@ -168,6 +168,9 @@ class KeyframeData:
     new_line_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))                # (K,) -1: none
     line_endpoints_cam: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))            # (K,2,3) NaN: none
     sent_at: float = 0.0         # wall time sent (filled in by ActorContext.send): local mapping's queue wait
+    # loop corrections tracking had applied when it tracked this keyframe (issue 10): local
+    # mapping brings a keyframe tracked before a correction reached tracking up to date
+    loop_epoch: int = 0
 
     def __len__(self) -> int:
         return len(self.uv)
@@ -191,6 +194,7 @@ class LocalMapUpdate:
     line_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))              # (L,)
     line_endpoints: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))          # (L,2,3)
     line_descriptors: np.ndarray = field(default_factory=lambda: np.zeros((0, 32), np.uint8))  # (L,32)
+    loop_epoch: int = 0          # loop corrections applied to the map so far (issue 10)
 
     def __len__(self) -> int:
         return len(self.landmark_ids)
@@ -239,3 +243,48 @@ class InspectReply:
     run_id: str = ""
     payload: dict = field(default_factory=dict)
     error: str = ""
+# --- local mapping <-> loop closing (issue 10) --------------------------------------
+
+@message("loop_keyframe")
+class LoopKeyframe:
+    """Local mapping → loop closing: what place recognition needs of one keyframe.
+
+    Row i describes left keypoint i (as in ``KeyframeData``); ``landmark_ids[i]`` is the
+    map landmark it observes after insertion (-1: none), which gives covisibility.
+    ``window_poses`` are the poses local BA just refined (keyframe index → T_world_cam), so
+    the pose graph starts from the map as it is now.
+    """
+
+    index: int
+    timestamp: float
+    T_world_cam: np.ndarray      # (4,4)
+    uv: np.ndarray               # (N,2) float32
+    u_right: np.ndarray          # (N,) float32, -1 where no stereo match
+    depth: np.ndarray            # (N,) float32, -1 where no stereo match
+    octave: np.ndarray           # (N,) int32
+    descriptors: np.ndarray      # (N,32) uint8
+    landmark_ids: np.ndarray     # (N,) int64
+    window_poses: dict[int, np.ndarray] = field(default_factory=dict)
+    line_segments: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), np.float32))
+    line_descriptors: np.ndarray = field(default_factory=lambda: np.zeros((0, 32), np.uint8))
+    sent_at: float = 0.0
+
+
+@message("loop_result")
+class LoopResult:
+    """Loop closing → local mapping (one per keyframe; the supervisor gets the closed ones).
+
+    When ``closed``, ``corrections[k]`` is the world-frame correction C = T'_wc T_wc^-1 of
+    keyframe ``keyframe_ids[k]`` after pose-graph optimisation; keyframes not listed ride
+    with the nearest older listed one, landmarks with their reference keyframe.
+    """
+
+    keyframe_index: int
+    closed: bool = False
+    candidate: int = -1
+    n_inliers: int = 0
+    keyframe_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    corrections: np.ndarray = field(default_factory=lambda: np.zeros((0, 4, 4)))
+    loops: int = 0               # loops closed so far in this run
+    timings_ms: dict = field(default_factory=dict)
+    sent_at: float = 0.0

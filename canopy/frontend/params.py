@@ -81,6 +81,11 @@ class TrackingParams:
     min_new_close_points: int = 70      # ORB-SLAM stereo: insert when few close points tracked
     min_tracked_close: int = 100
     min_init_points: int = 100          # stereo points needed to (re)start a map
+    # Relocalisation (issue 10): after tracking is lost, the next frames are tracked against
+    # the same local map from the constant-velocity prediction carried over the lost frames
+    # (and appearance matching when it is off); only after this many lost frames does
+    # tracking start a new map at the last good pose. 0: start a new map at once.
+    relocalise_bridge_frames: int = 10
 
     # --- line features in tracking (AGRI §3.2.1-3.2.3, Eq. 10-11; issue 4) -----------
     # Off: the points-only pipeline runs unchanged. On: FLD/LSD segments of the left image
@@ -141,6 +146,7 @@ class TrackingParams:
         need(self.max_frames_between_keyframes > self.min_frames_between_keyframes,
              "max_frames_between_keyframes", "must exceed min_frames_between_keyframes")
         need(0 < self.min_tracked_fraction <= 1, "min_tracked_fraction", "must be in (0, 1]")
+        need(self.relocalise_bridge_frames >= 0, "relocalise_bridge_frames", "must be >= 0")
         need(self.min_init_points >= self.min_inliers, "min_init_points", "must be >= min_inliers")
         need(self.line_detector in ("fld", "lsd"), "line_detector", "must be 'fld' or 'lsd'")
         need(self.line_max_lines > 0, "line_max_lines", "must be > 0")

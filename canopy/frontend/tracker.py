@@ -4,6 +4,15 @@ against the local-map view, EPnP RANSAC + motion-only refinement, entropy-ratio 
 ``Tracker`` is process-free: ``track(frame)`` consumes one StereoFrame and returns a
 ``TrackingResult`` (with a ``KeyframeData`` payload when a keyframe is chosen);
 ``apply_map_update(update)`` feeds the local map computed by local mapping back in.
+
+Where things are:
+* the landmark store tracking reads: ``Tracker._map_view()`` -> ``canopy.frontend.map_view.MapView``
+  (last ``LocalMapUpdate`` in ``_update_view`` + provisional landmarks of unacknowledged
+  keyframes in ``_provisional``);
+* pose solving (projection search, EPnP RANSAC, motion-only refinement):
+  ``canopy.frontend.map_tracking.MapTrackingMixin``;
+* the keyframe policy (AGRI Eq. 6-7 and ORB-SLAM's conditions): ``canopy.frontend.keyframe_policy``;
+* line features: ``canopy.frontend.tracker_lines.TrackerLinesMixin``.
 """
 from __future__ import annotations
 
@@ -11,17 +20,18 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from typing import TYPE_CHECKING
 
-import cv2
 import numpy as np
 
 from canopy.frontend.features import Features, OrbExtractor
-from canopy.frontend.geometry import (differential_entropy, pose_from_rvec, pose_information, project_stereo,
-                                      se3_inv, stereo_pose_jacobian, transform)
-from canopy.frontend.matching import as_words, knn_match, match_in_window
+from canopy.frontend.geometry import (differential_entropy, pose_information, se3_inv, stereo_pose_jacobian,
+                                      transform)
+from canopy.frontend.map_tracking import MapTrackingMixin
+from canopy.frontend.map_view import MapView, merge_views
+from canopy.frontend.matching import as_words
 from canopy.frontend.messages import KeyframeData, LocalMapUpdate, TrackingResult
 from canopy.frontend.params import TrackingParams
-from canopy.frontend.pose import refine_pose
 from canopy.frontend.stereo import StereoMatches, match_stereo
+from canopy.frontend.tracker_lines import TrackerLinesMixin
 from shared.types import StereoCalibration, StereoFrame
 
 if TYPE_CHECKING:
@@ -35,23 +45,7 @@ def _ms(t0: float) -> float:
     return (time.perf_counter() - t0) * 1e3
 
 
-class _MapView:
-    """Tracking's copy of the local map: arrays of landmark ids, positions, descriptors."""
-
-    def __init__(self):
-        self.ids = np.zeros(0, np.int64)
-        self.pos = np.zeros((0, 3))
-        self.desc = np.zeros((0, 32), np.uint8)
-        self.words = as_words(self.desc)
-
-    def set(self, ids, pos, desc):
-        self.ids = np.asarray(ids, np.int64)
-        self.pos = np.asarray(pos, np.float64).reshape(-1, 3)
-        self.desc = np.ascontiguousarray(desc, np.uint8).reshape(-1, 32)
-        self.words = as_words(self.desc)
-
-
-class Tracker:
+class Tracker(MapTrackingMixin, TrackerLinesMixin):
     def __init__(self, calib: StereoCalibration, params: TrackingParams | None = None,
                  initial_pose: np.ndarray | None = None):
         self.calib = calib
@@ -66,15 +60,17 @@ class Tracker:
         self._max_depth = self.params.max_depth_baselines * calib.baseline
         self._close_depth = self.params.close_depth_baselines * calib.baseline
         # map view = last update + provisional landmarks of keyframes not yet acknowledged
-        self._update_view = _MapView()
+        self._update_view = MapView()
         self._provisional: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-        self._view = _MapView()
+        self._view = MapView()
         self._view_dirty = False
         self._next_landmark_id = 0
         self._segment_start_kf = -1
         # motion state
         self._initialised = False
         self._need_restart = False
+        self._lost_streak = 0                       # frames lost in a row (relocalisation bridge)
+        self._bridge_velocity = np.eye(4)           # per-frame motion when tracking was lost
         self._T_last = self._initial_pose.copy()    # T_world_cam of the last good frame
         self._velocity = np.eye(4)                  # T_last-1_last (constant-velocity model)
         self._last_points_w: np.ndarray | None = None  # last frame's stereo points (fallback)
@@ -142,94 +138,11 @@ class Tracker:
             if self._last_points_w is not None:
                 self._last_points_w = transform(C, self._last_points_w)
 
-    def _map_view(self) -> _MapView:
+    def _map_view(self) -> MapView:
         if self._view_dirty:
-            parts = [(self._update_view.ids, self._update_view.pos, self._update_view.desc)]
-            parts += [self._provisional[k] for k in sorted(self._provisional)]
-            ids = np.concatenate([p[0] for p in parts])
-            pos = np.concatenate([p[1] for p in parts])
-            desc = np.concatenate([p[2] for p in parts])
-            _, first = np.unique(ids, return_index=True)
-            first = np.sort(first)
-            self._view.set(ids[first], pos[first], desc[first])
+            merge_views(self._update_view, self._provisional, self._view)
             self._view_dirty = False
         return self._view
-
-    def _line_map_view(self):
-        if self._line_view_dirty:
-            parts = [(self._line_update_view.ids, self._line_update_view.endpoints, self._line_update_view.desc)]
-            parts += [self._line_provisional[k] for k in sorted(self._line_provisional)]
-            ids = np.concatenate([q[0] for q in parts])
-            _, first = np.unique(ids, return_index=True)
-            first = np.sort(first)
-            self._line_view.set(ids[first], np.concatenate([q[1] for q in parts])[first],
-                                np.concatenate([q[2] for q in parts])[first])
-            self._line_view_dirty = False
-        return self._line_view
-
-    def _detect_lines(self, image: np.ndarray, left=None) -> LineFrame:
-        """Segments + LBD of one image (AGRI §3.2.1), in the line worker.
-
-        ``left`` (the left image's LineFrame, or the future of it queued before this job in the
-        same worker) marks a right image: only its segments within stereo reach of a left
-        segment (``right_segments_in_reach``) are kept and described; the others could never
-        be matched.
-        """
-        t0 = time.perf_counter()
-        scale = self.params.line_image_scale
-        if scale != 1.0:  # detect and describe on a reduced image, endpoints back in full-size pixels
-            image = cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
-        segs, stats = self._detect_segments(image, self.line_params)
-        # full-size pixels: pixel centres of the INTER_AREA grid above
-        full = (segs.astype(np.float64) + 0.5) / scale - 0.5 if scale != 1.0 else segs.astype(np.float64)
-        if left is not None:
-            left = left.result() if hasattr(left, "result") else left
-            keep = self._right_in_reach(left.segs, full, self.calib, self.line_params)
-            segs, full = segs[keep], full[keep]
-            stats["out_of_reach"] = int((~keep).sum())
-        t1 = time.perf_counter()
-        desc = (self._line_describer if left is None else self._line_describer_right)(image, segs)
-        stats["detect_ms"] = (t1 - t0) * 1e3
-        stats["describe_ms"] = _ms(t1)
-        return self._lt.LineFrame.build(full, desc, stats)
-
-    def _keyframe_likely(self) -> bool:
-        """Whether this frame may well become a keyframe: (re)initialisation, right after a
-        keyframe (keyframes come in runs when the view changes fast, as on KITTI), or the
-        frame where ``max_frames_between_keyframes`` forces one."""
-        return (not self._initialised or self._need_restart or self._last_was_keyframe
-                or self._frames_since_kf + 1 >= self.params.max_frames_between_keyframes)
-
-    def _submit_line_jobs(self, frame: StereoFrame):
-        """Queue the left image's lines and, when a keyframe is likely, the right image's (needed
-        only by keyframes) in the line worker; returns the left job. The right lines are a pure
-        function of the right image, so whether they were computed ahead or on demand never
-        changes a result."""
-        job = self._line_pool.submit(self._detect_lines, frame.left)
-        if self._keyframe_likely():
-            self._right_lines_job = (frame.index, self._line_pool.submit(self._detect_lines, frame.right, job))
-        return job
-
-    def _right_lines(self, frame: StereoFrame, lines: LineFrame) -> LineFrame:
-        """The right image's lines: the job queued ahead, or one queued now (in the same worker,
-        so the right describer is never used by two threads)."""
-        t0 = time.perf_counter()
-        ahead = self._right_lines_job
-        self._right_lines_job = None
-        if ahead is not None and ahead[0] == frame.index:
-            right = ahead[1].result()
-            self._line_timings["lines_right_wait"] = _ms(t0)
-        else:
-            right = self._line_pool.submit(self._detect_lines, frame.right, lines).result()
-            self._line_timings["lines_right_on_demand"] = _ms(t0)
-        return right
-
-    def _finish_line_jobs(self, is_keyframe: bool) -> None:
-        """Drop a right-image job queued for a frame that did not become a keyframe."""
-        self._last_was_keyframe = bool(is_keyframe)
-        if self._right_lines_job is not None:
-            self._right_lines_job[1].cancel()  # no-op if already running: it finishes on its own
-            self._right_lines_job = None
 
     # ------------------------------------------------------------------ helpers
     def _sigma(self, octave: np.ndarray) -> np.ndarray:
@@ -278,7 +191,9 @@ class Tracker:
             timings["lines_wait"] = _ms(t0)  # what the worker's detection + LBD cost beyond ORB/stereo
             timings["lines_detect_worker"] = lines.stats["detect_ms"]
             timings["lines_describe_worker"] = lines.stats["describe_ms"]
-        if not self._initialised or self._need_restart:
+        if self._need_restart and 0 < self._lost_streak <= self.params.relocalise_bridge_frames:
+            res = self._relocalise(frame, left, stereo, timings, lines)
+        elif not self._initialised or self._need_restart:
             res = self._initialise(frame, left, stereo, n_stereo, lines)
         else:
             res = self._track_frame(frame, left, stereo, timings, lines)
@@ -291,17 +206,39 @@ class Tracker:
         res.timings = timings
         return res
 
+    # ------------------------------------------------------------------ relocalisation
+    def _relocalise(self, frame: StereoFrame, feats: Features, stereo: StereoMatches, timings,
+                    lines: LineFrame | None = None) -> TrackingResult:
+        """Track a frame after a loss against the same local map: the motion model bridges the
+        lost frames (prediction T_last V^(k+1) after k lost frames), and ``_track_frame`` falls
+        back to appearance matching against the map view when the prediction finds too little.
+        Success joins the existing map (no new segment)."""
+        k = self._lost_streak
+        self._velocity = np.linalg.matrix_power(self._bridge_velocity, k + 1)
+        self._need_restart = False
+        res = self._track_frame(frame, feats, stereo, timings, lines)
+        if res.status == STATUS_LOST:
+            self._lost_streak = k + 1  # _track_frame asked for a restart again
+            return res
+        self._lost_streak = 0
+        self._velocity = self._bridge_velocity.copy()
+        res.keyframe_reason = "+".join(filter(None, [res.keyframe_reason, "relocalised"]))
+        return res
+
     # ------------------------------------------------------------------ (re)initialisation
     def _initialise(self, frame: StereoFrame, feats: Features, stereo: StereoMatches, n_stereo: int,
                     lines: LineFrame | None = None) -> TrackingResult:
         T_wc = self._T_last.copy()  # first frame: initial pose; restart: last good pose
         if n_stereo < self.params.min_init_points:
             self.n_lost += 1
+            if self._initialised:
+                self._lost_streak += 1
             return TrackingResult(frame.index, frame.timestamp, T_wc, STATUS_LOST, 0, 0, False, None,
                                   self._ref_kf)
         restart = True
         self._initialised = True
         self._need_restart = False
+        self._lost_streak = 0
         self._velocity = np.eye(4)
         # a new map segment: forget the old view (its landmarks are not connected to this one)
         self._update_view.set(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 32), np.uint8))
@@ -321,39 +258,6 @@ class Tracker:
         self._after_frame(T_wc, feats, stereo)
         return TrackingResult(frame.index, frame.timestamp, T_wc, STATUS_INIT, int((kf.new_landmark_ids >= 0).sum()),
                               0, True, kf, frame.index, T_ref_cam=np.eye(4))
-
-    def _keyframe_lines(self, frame: StereoFrame, lines: LineFrame, line_matched: np.ndarray, T_wc: np.ndarray) -> dict:
-        """Line fields of the keyframe: matched map lines plus new stereo lines (AGRI §3.2.2).
-
-        The right image's lines are needed only here (stereo lines only at keyframes): queued
-        ahead in the line worker when a keyframe was likely, else now. New lines are stereo
-        matches not matched to a map line, with both endpoints in front and closer than
-        ``line_max_depth_baselines`` baselines.
-        """
-        n = len(lines)
-        right = self._right_lines(frame, lines)
-        st = self._match_stereo_lines(lines.segs, lines.desc, right.segs, right.desc, self.calib, self.line_params)
-        seg_r = np.full((n, 4), np.nan)
-        P_cam = np.full((n, 2, 3), np.nan)
-        seg_r[st.left_idx] = right.segs[st.right_idx]
-        P_cam[st.left_idx] = st.points_cam
-        z = P_cam[:, :, 2]
-        with np.errstate(invalid="ignore"):
-            stereo_ok = np.isfinite(z).all(axis=1) & (z > 0).all(axis=1) & (z < self._line_max_depth).all(axis=1)
-        create = stereo_ok & (line_matched < 0)
-        idx = np.flatnonzero(create)
-        new_ids = np.full(n, -1, np.int64)
-        new_ids[idx] = self._next_line_id + np.arange(len(idx))
-        self._next_line_id += len(idx)
-        ends_w = transform(T_wc, P_cam[idx].reshape(-1, 3)).reshape(-1, 2, 3)
-        self._line_provisional[frame.index] = (new_ids[idx], ends_w, lines.desc[idx])
-        self._line_view_dirty = True
-        rows = np.flatnonzero((line_matched >= 0) | create)
-        self._ref_line_ids = np.unique(np.concatenate([line_matched[line_matched >= 0], new_ids[idx]]))
-        return dict(line_segments=lines.segs[rows].astype(np.float32),
-                    line_segments_right=seg_r[rows].astype(np.float32),
-                    line_descriptors=lines.desc[rows].copy(), line_ids=line_matched[rows].copy(),
-                    new_line_ids=new_ids[rows], line_endpoints_cam=P_cam[rows])
 
     def _make_keyframe(self, frame, feats, stereo, T_wc, matched_ids, restart=False, lines=None,
                        line_matched=None) -> KeyframeData:
@@ -398,85 +302,6 @@ class Tracker:
         idx = np.flatnonzero(stereo.valid)
         self._last_points_w = self._stereo_points_world(feats, stereo, T_wc, idx)
         self._last_words = as_words(feats.descriptors[idx])
-
-    # ------------------------------------------------------------------ temporal matching
-    def _search(self, T_cw, pos, words, feats: Features, kp_words, radius: float, scaled: bool = False):
-        """Project points with a pose and match each to the best keypoint within ``radius``."""
-        proj, Pc = project_stereo(T_cw, pos, self.calib)
-        in_view = ((Pc[:, 2] > 0) & (proj[:, 0] >= 0) & (proj[:, 0] < self.calib.width)
-                   & (proj[:, 1] >= 0) & (proj[:, 1] < self.calib.height))
-        r_scale = self.scale_factors[feats.octave] if scaled else None
-        q, r, _ = match_in_window(proj[:, :2], words, np.full(len(pos), radius), feats.uv, kp_words,
-                                  self.params.map_max_hamming, self.params.map_ratio, q_mask=in_view,
-                                  r_scale=r_scale)
-        return q, r, in_view
-
-    def _initial_matches(self, T_pred_cw, view: _MapView, feats: Features, kp_words):
-        """Stage 1: 3D-2D correspondences for RANSAC.
-
-        Returns (points (K,3), keypoint indices, landmark ids (-1: not a landmark), descriptor words).
-        """
-        p = self.params
-        enough = 2 * p.min_inliers
-        # ORB-SLAM TrackWithMotionModel: the landmarks matched in the previous frame
-        pos, words, lids = self._last_matched
-        q, r, _ = self._search(T_pred_cw, pos, words, feats, kp_words, p.search_radius)
-        if len(q) < enough:  # widen the window when too few matches
-            q, r, _ = self._search(T_pred_cw, pos, words, feats, kp_words, p.search_radius_wide)
-        best = (pos[q], r, lids[q], words[q])
-        if len(q) < enough:  # the whole local map through the prediction
-            q, r, _ = self._search(T_pred_cw, view.pos, view.words, feats, kp_words, p.search_radius_wide)
-            if len(q) > len(best[1]):
-                best = (view.pos[q], r, view.ids[q], view.words[q])
-        if len(best[1]) < enough and len(view.ids):
-            # no usable prediction: appearance only (RANSAC sorts out the outliers)
-            r2, q2, _ = knn_match(feats.descriptors, view.desc, p.map_max_hamming, p.map_ratio)
-            if len(q2) > len(best[1]):
-                best = (view.pos[q2], r2, view.ids[q2], view.words[q2])
-        if len(best[1]) < enough and self._last_points_w is not None and len(self._last_points_w):
-            # last resort: the previous frame's stereo points (frame-to-frame odometry)
-            q3, r3, _ = self._search(T_pred_cw, self._last_points_w, self._last_words, feats, kp_words,
-                                     p.search_radius_wide)
-            if len(q3) > len(best[1]):
-                best = (self._last_points_w[q3], r3, np.full(len(q3), -1, np.int64), self._last_words[q3])
-        return best
-
-    def _ransac(self, frame_index: int, X: np.ndarray, uv: np.ndarray):
-        """EPnP inside RANSAC (AGRI §3.2.3), seeded per frame for determinism."""
-        p = self.params
-        if len(X) < p.min_inliers:
-            return None, np.zeros(len(X), bool)
-        cv2.setRNGSeed(p.seed + frame_index)
-        found, rvec, tvec, inl = cv2.solvePnPRansac(
-            np.ascontiguousarray(X, np.float64).reshape(-1, 1, 3),
-            np.ascontiguousarray(uv, np.float64).reshape(-1, 1, 2), self.K, None,
-            iterationsCount=p.pnp_iterations, reprojectionError=p.pnp_reprojection_error,
-            confidence=p.pnp_confidence, flags=cv2.SOLVEPNP_EPNP)
-        mask = np.zeros(len(X), bool)
-        if not found or inl is None or len(inl) < p.min_inliers:
-            return None, mask
-        mask[inl.reshape(-1)] = True
-        return pose_from_rvec(rvec, tvec), mask
-
-    def _refine(self, T_cw, X, r, feats: Features, stereo: StereoMatches, inliers=None, line_obs=None):
-        """Motion-only refinement; with ``line_obs`` = (A_w, B_w, line coefficients) the Eq. 10
-        line terms join the point terms (Eq. 11 with the map fixed)."""
-        p = self.params
-        meas = np.concatenate([feats.uv[r].astype(np.float64), stereo.u_right[r, None].astype(np.float64)], axis=1)
-        if line_obs is None:
-            return refine_pose(T_cw, X, meas, stereo.valid[r], self._sigma(feats.octave[r]), self.calib,
-                               p.pose_opt_rounds, p.pose_opt_iterations, p.chi2_mono, p.chi2_stereo, inliers=inliers)
-        A_w, B_w, coeffs = line_obs
-        return self._lt.refine_pose_points_lines(T_cw, X, meas, stereo.valid[r], self._sigma(feats.octave[r]), self.calib,
-                                                 p.pose_opt_rounds, p.pose_opt_iterations, p.chi2_mono, p.chi2_stereo,
-                                                 A_w, B_w, coeffs, p.line_sigma, p.chi2_line, inliers=inliers)
-
-    def _n_support(self, est) -> int:
-        """Inlier count deciding success: points, plus lines (x line_weight_in_count) when on."""
-        n = int(est.inliers.sum())
-        if self._lines_on and hasattr(est, "line_inliers"):
-            n += self.params.line_weight_in_count * int(est.line_inliers.sum())
-        return n
 
     def _track_frame(self, frame: StereoFrame, feats: Features, stereo: StereoMatches, timings,
                      lines: LineFrame | None = None) -> TrackingResult:
@@ -535,6 +360,9 @@ class Tracker:
         if not ok:
             self.n_lost += 1
             self._need_restart = True
+            if self._lost_streak == 0:  # first lost frame: keep the motion for the bridge
+                self._bridge_velocity = self._velocity.copy()
+                self._lost_streak = 1
             self._velocity = np.eye(4)
             self._seen = []
             return TrackingResult(frame.index, frame.timestamp, self._T_last.copy(), STATUS_LOST,

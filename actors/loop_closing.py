@@ -1,0 +1,67 @@
+"""Loop-closing actor: keyframe from local mapping → detection, verification, pose graph →
+correction back to local mapping (which forwards the corrected map to tracking).
+
+A thin loop around ``canopy.loop.LoopCloser``. Every keyframe is answered with a
+``LoopResult`` (closed or not), so that local mapping can, in lockstep, wait for the
+answer and keep runs repeatable; closed loops also go to the supervisor, which counts
+them in the outputs. Tracking never waits on this actor.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from actors.runtime import Actor, ActorContext
+from canopy.loop.closer import LoopCloser
+from canopy.loop.keyframe import PlaceKeyframe, with_bow
+from canopy.loop.database import FeatureStats
+from canopy.loop.vocabulary import load_vocabulary
+from protocol.messages import EndOfStream, LoopKeyframe, LoopResult
+
+
+def place_keyframe(msg: LoopKeyframe, vocabulary) -> PlaceKeyframe:
+    kf = PlaceKeyframe(index=int(msg.index), timestamp=float(msg.timestamp), T_world_cam=np.asarray(msg.T_world_cam, float),
+                       uv=np.asarray(msg.uv, np.float64), u_right=np.asarray(msg.u_right, np.float64),
+                       depth=np.asarray(msg.depth, np.float64), octave=np.asarray(msg.octave, np.int64),
+                       descriptors=np.asarray(msg.descriptors, np.uint8), landmark_ids=np.asarray(msg.landmark_ids, np.int64),
+                       stats=FeatureStats.of(np.zeros((0, 2)), msg.line_segments))
+    return with_bow(kf, vocabulary)
+
+
+class LoopClosingActor(Actor):
+    name = "loop_closing"
+
+    def setup(self, ctx: ActorContext) -> None:
+        params = self.config["params"]
+        self.vocabulary = load_vocabulary(params.vocabulary)
+        self.closer = LoopCloser(self.config["calib"], params, self.vocabulary)
+        ctx.extra.update({"loops": 0, "vocabulary": getattr(self.vocabulary, "name", "")})
+
+    def on_message(self, msg, ctx: ActorContext) -> None:
+        if isinstance(msg, LoopKeyframe):
+            t0 = time.perf_counter()
+            kf = place_keyframe(msg, self.vocabulary)
+            t_bow = (time.perf_counter() - t0) * 1e3
+            closure = self.closer.add_keyframe(kf, {int(k): v for k, v in msg.window_poses.items()})
+            if closure is None:
+                ctx.send("local_mapping", LoopResult(keyframe_index=kf.index, loops=self.closer.n_loops,
+                                                     timings_ms={"bow": t_bow}, sent_at=time.time()))
+            else:
+                ids = np.array(sorted(closure.corrections), np.int64)
+                result = LoopResult(keyframe_index=kf.index, closed=True, candidate=closure.constraint.candidate,
+                                    n_inliers=closure.constraint.n_inliers, keyframe_ids=ids,
+                                    corrections=np.array([closure.corrections[k] for k in ids.tolist()]).reshape(-1, 4, 4),
+                                    loops=self.closer.n_loops, timings_ms={"bow": t_bow, **closure.timings_ms},
+                                    sent_at=time.time())
+                ctx.send("local_mapping", result)
+                ctx.publish(LoopResult(keyframe_index=kf.index, closed=True, candidate=result.candidate,
+                                       n_inliers=result.n_inliers, loops=result.loops, timings_ms=result.timings_ms,
+                                       sent_at=result.sent_at))
+            s = self.closer.detector.stats
+            ctx.extra.update({"loops": self.closer.n_loops, "keyframes": s.keyframes, "queries": s.queries,
+                              "candidates": s.candidates, "consistent": s.consistent, "verified": s.verified,
+                              **{f"rejected_{k}": v for k, v in s.rejected.items()}})
+        elif isinstance(msg, EndOfStream):
+            ctx.send("local_mapping", EndOfStream(n_frames=msg.n_frames, sent_at=time.time()), block=False)
+            ctx.stop()

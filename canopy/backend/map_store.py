@@ -1,0 +1,53 @@
+"""The map's records (the keyframe and landmark stores of ``LocalMapper``).
+
+``LocalMapper.keyframes: dict[int, Keyframe]`` (by frame index), ``LocalMapper.landmarks:
+dict[int, Landmark]`` and ``LocalMapper.lines: dict[int, LineLandmark]`` (by id) are the
+whole map. A landmark's ``obs`` maps keyframe index -> keypoint row and the keyframe's
+``landmark`` array is the reverse index; both are kept in step by every change.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class Keyframe:
+    index: int
+    timestamp: float
+    T_world_cam: np.ndarray
+    uv: np.ndarray
+    u_right: np.ndarray
+    octave: np.ndarray
+    descriptors: np.ndarray
+    landmark: np.ndarray      # (N,) landmark id observed by keypoint i, -1 for none
+    segment: int
+    order: int                # insertion counter (ages of landmarks are counted in keyframes)
+    # line observations (empty without lines): infinite lines of the left / right segments
+    line_coeffs: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    line_coeffs_right: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # NaN: no stereo
+    line_descriptors: np.ndarray = field(default_factory=lambda: np.zeros((0, 32), np.uint8))
+    line_landmark: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+
+
+@dataclass
+class Landmark:
+    id: int
+    position: np.ndarray
+    descriptor: np.ndarray
+    obs: dict[int, int] = field(default_factory=dict)  # keyframe index -> keypoint index
+    first_order: int = 0
+    segment: int = 0
+    visible: int = 1
+    found: int = 1
+
+
+@dataclass
+class LineLandmark:
+    id: int
+    endpoints: np.ndarray                              # (2,3) A, B in world
+    descriptor: np.ndarray                             # (32,) LBD of the latest observation
+    obs: dict[int, int] = field(default_factory=dict)  # keyframe index -> line row
+    first_order: int = 0
+    segment: int = 0

@@ -1,0 +1,51 @@
+"""Applying a loop correction to local mapping's map (ORB-SLAM CorrectLoop, mapper side).
+
+Works on the map's public state: ``keyframes[k].T_world_cam``, ``landmarks[id].position``
+with ``.obs`` (keyframe -> keypoint), and line landmarks' ``.endpoints``. Every keyframe
+moves by its correction (or that of the nearest older corrected keyframe), every landmark
+rigidly with its reference keyframe, the first keyframe that observed it.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from canopy.loop.pose_graph import correction_for
+
+
+def corrections_from_arrays(keyframe_ids: np.ndarray, corrections: np.ndarray) -> dict[int, np.ndarray]:
+    return {int(k): np.asarray(C, float) for k, C in zip(np.asarray(keyframe_ids).tolist(),
+                                                         np.asarray(corrections, float).reshape(-1, 4, 4))}
+
+
+def _apply(C: np.ndarray, X: np.ndarray) -> np.ndarray:
+    return X @ C[:3, :3].T + C[:3, 3]
+
+
+def apply_loop_correction(mapper, corrections: dict[int, np.ndarray]) -> int:
+    """Move the mapper's keyframes and landmarks; returns the number of keyframes moved."""
+    if not corrections:
+        return 0
+    for k, rec in mapper.keyframes.items():
+        rec.T_world_cam = correction_for(int(k), corrections) @ rec.T_world_cam
+    for lm in mapper.landmarks.values():
+        if lm.obs:
+            lm.position = _apply(correction_for(int(min(lm.obs)), corrections), np.asarray(lm.position, float))
+    for ln in getattr(mapper, "lines", {}).values():
+        if ln.obs:
+            ln.endpoints = _apply(correction_for(int(min(ln.obs)), corrections), np.asarray(ln.endpoints, float))
+    return len(mapper.keyframes)
+
+
+def refresh_update(mapper, update) -> None:
+    """Re-read the positions and poses of a ``LocalMapUpdate`` from the corrected map, and
+    add every keyframe pose so tracking's reference keyframe is among them."""
+    ids = np.asarray(update.landmark_ids, np.int64)
+    if len(ids):
+        update.positions = np.array([mapper.landmarks[i].position if i in mapper.landmarks else p
+                                     for i, p in zip(ids.tolist(), np.asarray(update.positions, float))], float)
+    lines = getattr(mapper, "lines", {})
+    line_ids = np.asarray(getattr(update, "line_ids", np.zeros(0)), np.int64)
+    if len(line_ids):
+        update.line_endpoints = np.array([lines[i].endpoints if i in lines else e
+                                          for i, e in zip(line_ids.tolist(), np.asarray(update.line_endpoints, float))])
+    update.keyframe_poses = {int(k): rec.T_world_cam.copy() for k, rec in mapper.keyframes.items()}

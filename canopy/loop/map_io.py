@@ -1,0 +1,172 @@
+"""Maps that outlive a run: local mapping's map as one versioned msgpack file.
+
+The file holds what relocalising and extending a map need: keyframes (pose, keypoints with
+stereo, descriptors, the landmark each keypoint observes), landmarks (position, descriptor),
+covisibility (shared-landmark counts), the calibration it was built with and the id of the
+vocabulary its place recognition used. Arrays are stored as raw bytes with dtype and shape.
+A file of another format version, or built with another calibration, is refused with an
+error that says which.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import msgpack
+import numpy as np
+
+from shared.errors import InputError
+from shared.types import StereoCalibration
+
+MAP_FORMAT = "canopy-map"
+MAP_VERSION = 1
+CALIBRATION_TOLERANCE = 1e-6  # relative, per intrinsic
+
+
+def _pack_array(a: np.ndarray) -> dict:
+    a = np.ascontiguousarray(a)
+    return {"dtype": a.dtype.str, "shape": list(a.shape), "data": a.tobytes()}
+
+
+def _unpack_array(d: dict, path: Path, name: str) -> np.ndarray:
+    try:
+        dtype = np.dtype(d["dtype"])
+        shape = tuple(int(s) for s in d["shape"])
+        return np.frombuffer(d["data"], dtype=dtype).reshape(shape).copy()
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(path, f"map field {name!r} is not a valid array ({exc})") from None
+
+
+@dataclass
+class MapData:
+    calibration: StereoCalibration
+    vocabulary: str
+    kf_index: np.ndarray        # (K,) int64
+    kf_timestamp: np.ndarray    # (K,)
+    kf_pose: np.ndarray         # (K,4,4) T_world_cam
+    kf_segment: np.ndarray      # (K,) int64
+    kf_offsets: np.ndarray      # (K+1,) rows of keyframe k: offsets[k]:offsets[k+1]
+    uv: np.ndarray              # (R,2)
+    u_right: np.ndarray         # (R,)
+    octave: np.ndarray          # (R,)
+    descriptors: np.ndarray     # (R,32) uint8
+    landmark: np.ndarray        # (R,) int64, -1: none
+    lm_id: np.ndarray           # (M,) int64
+    lm_position: np.ndarray     # (M,3)
+    lm_descriptor: np.ndarray   # (M,32) uint8
+    lm_segment: np.ndarray      # (M,) int64
+    covisibility: np.ndarray    # (P,3) int64: keyframe a, keyframe b, shared landmarks
+
+    ARRAYS = ("kf_index", "kf_timestamp", "kf_pose", "kf_segment", "kf_offsets", "uv", "u_right", "octave",
+              "descriptors", "landmark", "lm_id", "lm_position", "lm_descriptor", "lm_segment", "covisibility")
+
+    def keyframe_rows(self, k: int) -> slice:
+        return slice(int(self.kf_offsets[k]), int(self.kf_offsets[k + 1]))
+
+
+def map_from_mapper(mapper, vocabulary: str = "") -> MapData:
+    """Snapshot of a ``LocalMapper`` (keyframes, landmarks and their covisibility)."""
+    idx = sorted(mapper.keyframes)
+    kfs = [mapper.keyframes[i] for i in idx]
+    counts = np.array([len(k.uv) for k in kfs], np.int64)
+    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+
+    def cat(get, shape, dtype):
+        parts = [np.asarray(get(k), dtype).reshape(shape) for k in kfs]
+        return np.concatenate(parts) if parts else np.zeros((0,) + shape[1:], dtype)
+
+    lids = sorted(mapper.landmarks)
+    lms = [mapper.landmarks[i] for i in lids]
+    pairs: dict[tuple[int, int], int] = {}
+    for lm in lms:
+        obs = sorted(lm.obs)
+        for a_i, a in enumerate(obs):
+            for b in obs[a_i + 1:]:
+                pairs[(a, b)] = pairs.get((a, b), 0) + 1
+    cov = np.array([[a, b, n] for (a, b), n in sorted(pairs.items())], np.int64).reshape(-1, 3)
+    return MapData(
+        calibration=mapper.calib, vocabulary=vocabulary,
+        kf_index=np.array(idx, np.int64), kf_timestamp=np.array([k.timestamp for k in kfs], float),
+        kf_pose=np.array([k.T_world_cam for k in kfs], float).reshape(-1, 4, 4),
+        kf_segment=np.array([k.segment for k in kfs], np.int64), kf_offsets=offsets,
+        uv=cat(lambda k: k.uv, (-1, 2), np.float64), u_right=cat(lambda k: k.u_right, (-1,), np.float64),
+        octave=cat(lambda k: k.octave, (-1,), np.int64), descriptors=cat(lambda k: k.descriptors, (-1, 32), np.uint8),
+        landmark=cat(lambda k: k.landmark, (-1,), np.int64),
+        lm_id=np.array(lids, np.int64), lm_position=np.array([lm.position for lm in lms], float).reshape(-1, 3),
+        lm_descriptor=np.array([lm.descriptor for lm in lms], np.uint8).reshape(-1, 32),
+        lm_segment=np.array([lm.segment for lm in lms], np.int64), covisibility=cov)
+
+
+def save_map(path: str | Path, data: MapData) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    doc = {"format": MAP_FORMAT, "version": MAP_VERSION, "calibration": data.calibration.to_dict(),
+           "vocabulary": data.vocabulary, "arrays": {n: _pack_array(getattr(data, n)) for n in MapData.ARRAYS}}
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_bytes(msgpack.packb(doc, use_bin_type=True))
+    tmp.replace(path)  # never a half-written map under the final name
+    return path
+
+
+def _check_calibration(path: Path, stored: dict, calib: StereoCalibration) -> None:
+    mine = calib.to_dict()
+    for key, value in mine.items():
+        theirs = stored.get(key)
+        if theirs is None or abs(float(theirs) - float(value)) > CALIBRATION_TOLERANCE * max(1.0, abs(float(value))):
+            raise InputError(path, f"map was built with another calibration ({key} = {theirs}, this camera has "
+                                   f"{value}); it cannot be used with this sequence")
+
+
+def load_map(path: str | Path, calib: StereoCalibration | None = None) -> MapData:
+    """Read a map file; with ``calib``, refuse a map built with another calibration."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "map file not found")
+    try:
+        doc = msgpack.unpackb(path.read_bytes(), raw=False)
+    except Exception as exc:  # msgpack raises several unrelated types on garbage
+        raise InputError(path, f"not a Canopy map file ({type(exc).__name__})") from None
+    if not isinstance(doc, dict) or doc.get("format") != MAP_FORMAT:
+        raise InputError(path, "not a Canopy map file (no 'canopy-map' header)")
+    if doc.get("version") != MAP_VERSION:
+        raise InputError(path, f"map format version {doc.get('version')} is not supported by this build "
+                               f"(reads version {MAP_VERSION})")
+    stored = doc.get("calibration") or {}
+    if calib is not None:
+        _check_calibration(path, stored, calib)
+    arrays = doc.get("arrays") or {}
+    missing = [n for n in MapData.ARRAYS if n not in arrays]
+    if missing:
+        raise InputError(path, f"map file lacks {missing}")
+    try:
+        cal = StereoCalibration(**{k: (int(v) if k in ("width", "height") else float(v)) for k, v in stored.items()})
+    except TypeError as exc:
+        raise InputError(path, f"map calibration is incomplete ({exc})") from None
+    data = MapData(calibration=cal, vocabulary=str(doc.get("vocabulary", "")),
+                   **{n: _unpack_array(arrays[n], path, n) for n in MapData.ARRAYS})
+    if len(data.kf_offsets) != len(data.kf_index) + 1 or int(data.kf_offsets[-1]) != len(data.uv):
+        raise InputError(path, "map keyframe table is inconsistent with its keypoints")
+    return data
+
+
+def restore_mapper(data: MapData, mapper) -> None:
+    """Fill an empty ``LocalMapper`` with a loaded map (observations rebuilt from the keyframes)."""
+    from canopy.backend.map_store import Keyframe, Landmark
+
+    mapper.keyframes.clear()
+    mapper.landmarks.clear()
+    for j, lid in enumerate(data.lm_id.tolist()):
+        mapper.landmarks[lid] = Landmark(lid, data.lm_position[j].copy(), data.lm_descriptor[j].copy(), {},
+                                         segment=int(data.lm_segment[j]))
+    for k, index in enumerate(data.kf_index.tolist()):
+        rows = data.keyframe_rows(k)
+        rec = Keyframe(index, float(data.kf_timestamp[k]), data.kf_pose[k].copy(), data.uv[rows].copy(),
+                       data.u_right[rows].copy(), data.octave[rows].copy(), data.descriptors[rows].copy(),
+                       data.landmark[rows].copy(), int(data.kf_segment[k]), k)
+        mapper.keyframes[index] = rec
+        for i in np.flatnonzero(rec.landmark >= 0).tolist():
+            lm = mapper.landmarks.get(int(rec.landmark[i]))
+            if lm is not None:
+                lm.obs[index] = i
+    mapper._order = len(data.kf_index)
+    mapper._segment = int(data.kf_segment.max()) if len(data.kf_segment) else -1
