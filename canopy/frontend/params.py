@@ -39,6 +39,10 @@ class TrackingParams:
     subpixel_window: int = 5            # half size of the SAD patch (11x11 as ORB-SLAM2)
     subpixel_search: int = 5            # SAD search +/- px around the descriptor match
     sad_outlier_factor: float = 2.1     # reject SAD > factor * median (1.5 * 1.4 in ORB-SLAM2)
+    # Constant disparity offset of the rectified rig, px: d_true = d_measured + disparity_offset_px
+    # (a right principal point off by a fraction of a pixel). Measure it without ground truth with
+    # benchmarks/calibrate_disparity_offset.py (canopy.frontend.disparity_offset).
+    disparity_offset_px: float = 0.0
 
     # --- temporal matching against the local map -----------------------------------
     # Stage 1 (ORB-SLAM TrackWithMotionModel): project the local map with the constant-velocity
@@ -122,6 +126,7 @@ class TrackingParams:
         need(self.row_tolerance >= 0, "row_tolerance", "must be >= 0")
         need(self.subpixel_window >= 1, "subpixel_window", "must be >= 1")
         need(self.subpixel_search >= 1, "subpixel_search", "must be >= 1")
+        need(abs(self.disparity_offset_px) < 5, "disparity_offset_px", "must be within +-5 px")
         need(self.search_radius > 0, "search_radius", "must be > 0")
         need(self.search_radius_wide >= self.search_radius, "search_radius_wide", "must be >= search_radius")
         need(self.search_radius_local > 0, "search_radius_local", "must be > 0")

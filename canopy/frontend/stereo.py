@@ -5,7 +5,8 @@ the octave), with a neighbouring octave and a disparity in [min, max]; best Hamm
 distance with a ratio test to the second best; each right keypoint used once; then
 sub-pixel refinement of u_right by SAD patch correlation along the row on the keypoint's
 pyramid level with a parabola fit through the three costs around the minimum; finally
-matches whose SAD exceeds ``sad_outlier_factor`` times the median are rejected.
+matches whose SAD exceeds ``sad_outlier_factor`` times the median are rejected. A calibrated
+constant disparity offset (``disparity_offset_px``) is added to every disparity.
 All steps are batched numpy (candidate pairs via row bands, one loop over pyramid levels).
 """
 from __future__ import annotations
@@ -129,6 +130,8 @@ def match_stereo(left: Features, right: Features, left_img: np.ndarray, right_im
                                   right.uv[ri, 0].astype(np.float64), left.octave[li], scale_factors,
                                   params.subpixel_window, params.subpixel_search)
     li, ur, sad = li[ok], ur[ok], sad[ok]
+    # the rig's constant disparity offset (canopy.frontend.disparity_offset): u_right moves with it
+    ur = ur - params.disparity_offset_px
     disp = left.uv[li, 0] - ur
     ok = (disp >= params.min_disparity) & (disp <= max_disp)
     li, ur, sad, disp = li[ok], ur[ok], sad[ok], disp[ok]
