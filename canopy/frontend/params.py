@@ -77,6 +77,21 @@ class TrackingParams:
     chi2_stereo: float = 7.815
     seed: int = 0                       # RANSAC seed; frame index is added per call
 
+    # --- trust in a pose (canopy.frontend.track_health; issue 9) ------------------------
+    # A refined pose is rejected (frame reported lost, with the reason) when fewer than
+    # min_inlier_fraction of its matches agree with it, or when it departs from the
+    # constant-velocity prediction by more than the deviations below (a wild pose). A rejected
+    # frame within max_predicted_frames of the last tracked one gets the motion-model pose,
+    # reported as "predicted" (not tracked), and the map is kept; after that tracking restarts.
+    min_inlier_fraction: float = 0.2
+    max_motion_deviation_m: float = 2.0
+    max_motion_deviation_deg: float = 20.0
+    max_predicted_frames: int = 2
+    # FAST threshold floor on noisy images: fast_noise_factor x the image noise sigma (Immerkaer
+    # estimate); 0 switches it off. Clean images (the estimate sees fine texture too: 2-6 grey
+    # levels on KITTI, EuRoC and the generated sequences) keep fast_threshold.
+    fast_noise_factor: float = 3.0
+
     # --- keyframe selection (AGRI §3.2.4, Eq. 6-7; Kerl et al. 2013) ---------------
     entropy_ratio_alpha: float = 0.8
     min_frames_between_keyframes: int = 0
@@ -137,6 +152,11 @@ class TrackingParams:
         need(self.pnp_iterations > 0, "pnp_iterations", "must be > 0")
         need(0 < self.pnp_confidence < 1, "pnp_confidence", "must be in (0, 1)")
         need(self.min_inliers >= 6, "min_inliers", "must be >= 6 (a pose has 6 DoF)")
+        need(0 <= self.min_inlier_fraction < 1, "min_inlier_fraction", "must be in [0, 1)")
+        need(self.max_motion_deviation_m > 0, "max_motion_deviation_m", "must be > 0")
+        need(self.max_motion_deviation_deg > 0, "max_motion_deviation_deg", "must be > 0")
+        need(self.max_predicted_frames >= 0, "max_predicted_frames", "must be >= 0")
+        need(self.fast_noise_factor >= 0, "fast_noise_factor", "must be >= 0")
         need(self.pixel_sigma > 0, "pixel_sigma", "must be > 0")
         need(self.pose_opt_rounds >= 1, "pose_opt_rounds", "must be >= 1")
         need(self.pose_opt_iterations >= 1, "pose_opt_iterations", "must be >= 1")

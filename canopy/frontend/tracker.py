@@ -31,6 +31,8 @@ from canopy.frontend.matching import as_words
 from canopy.frontend.messages import KeyframeData, LocalMapUpdate, TrackingResult
 from canopy.frontend.params import TrackingParams
 from canopy.frontend.stereo import StereoMatches, match_stereo
+from canopy.frontend.track_health import (LOST_TOO_FEW_MATCHES, LOST_TOO_FEW_STEREO, image_noise_sigma,
+                                          judge_pose)
 from canopy.frontend.tracker_lines import TrackerLinesMixin
 from shared.types import StereoCalibration, StereoFrame
 
@@ -38,6 +40,7 @@ if TYPE_CHECKING:
     from canopy.frontend.line_tracking import LineFrame
 
 STATUS_INIT, STATUS_OK, STATUS_LOST = "init", "ok", "lost"
+STATUS_PREDICTED = "predicted"  # no trusted pose: the motion model's, bridging a short gap (lost_reason says why)
 LINE_REJECT_REASONS = ("nan", "zero_length", "outside", "short")  # canopy.lines.detect_segments stats
 
 
@@ -83,6 +86,9 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin):
         self._ref_tracked_first: int | None = None
         self._seen: list[tuple[np.ndarray, np.ndarray]] = []
         self.n_lost = 0
+        self.n_predicted = 0
+        self._n_failed = 0            # consecutive frames without a trusted pose
+        self._velocity_valid = False  # the constant-velocity model has seen two tracked frames
         # line features (issue 4), all inert unless params.use_lines
         self._lines_on = bool(self.params.use_lines)
         if self._lines_on:
@@ -166,6 +172,17 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin):
         timings: dict[str, float] = {}
         t_all = time.perf_counter()
         t0 = time.perf_counter()
+        noise_sigma = None
+        if self.params.fast_noise_factor > 0:
+            # FAST threshold floor from the image noise (track_health): corners from the signal
+            noise_sigma = image_noise_sigma(frame.left)
+            floor = int(round(self.params.fast_noise_factor * noise_sigma))
+            base = self.params.fast_threshold if fast_threshold is None else int(fast_threshold)
+            if floor > base:
+                fast_threshold = min(floor, 254)
+                if fast_fallback is not None:
+                    fast_fallback = max(int(fast_fallback), min(floor, 254) // 2)
+            timings["noise_estimate"] = _ms(t0)
         if self._pool is not None:
             right_job = self._pool.submit(self.extractor_right.extract, frame.right, fast_threshold,
                                           fast_fallback, fast_min_keypoints)
@@ -194,6 +211,7 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin):
         else:
             res = self._track_frame(frame, left, stereo, timings, lines)
         res.n_stereo = n_stereo
+        res.noise_sigma = noise_sigma
         if self._lines_on:
             self._finish_line_jobs(res.is_keyframe)
             timings.update(self._line_timings)
@@ -209,11 +227,13 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin):
         if n_stereo < self.params.min_init_points:
             self.n_lost += 1
             return TrackingResult(frame.index, frame.timestamp, T_wc, STATUS_LOST, 0, 0, False, None,
-                                  self._ref_kf)
+                                  self._ref_kf, lost_reason=LOST_TOO_FEW_STEREO)
         restart = True
         self._initialised = True
         self._need_restart = False
         self._velocity = np.eye(4)
+        self._velocity_valid = False
+        self._n_failed = 0
         # a new map segment: forget the old view (its landmarks are not connected to this one)
         self._update_view.set(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 32), np.uint8))
         self._provisional.clear()
@@ -269,6 +289,25 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin):
         self._entropy_first = None
         self._ref_tracked_first = None
         return kf
+
+    def _not_tracked(self, frame: StereoFrame, reason: str, n_inliers: int, n_matches: int) -> TrackingResult:
+        """A frame without a trusted pose. Within ``max_predicted_frames`` of the last tracked frame
+        the constant-velocity prediction bridges the gap (status "predicted", the map is kept);
+        after that the frame is lost and the next one restarts a map segment."""
+        self._n_failed += 1
+        if self._n_failed <= self.params.max_predicted_frames:
+            self.n_predicted += 1
+            self._T_last = self._T_last @ self._velocity
+            return TrackingResult(frame.index, frame.timestamp, self._T_last.copy(), STATUS_PREDICTED, n_inliers,
+                                  n_matches, False, None, self._ref_kf, T_ref_cam=se3_inv(self._T_ref) @ self._T_last,
+                                  lost_reason=reason)
+        self.n_lost += 1
+        self._need_restart = True
+        self._velocity = np.eye(4)
+        self._velocity_valid = False
+        self._seen = []
+        return TrackingResult(frame.index, frame.timestamp, self._T_last.copy(), STATUS_LOST, n_inliers, n_matches,
+                              False, None, self._ref_kf, lost_reason=reason)
 
     def _after_frame(self, T_wc, feats: Features, stereo: StereoMatches) -> None:
         self._velocity = se3_inv(self._T_last) @ T_wc
@@ -330,14 +369,14 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin):
                 est = self._refine(T_cw, X, r, feats, stereo, inliers=inliers, line_obs=line_obs)
         timings["track_local_map"] = _ms(t0)
         n_matches = len(r)
-        ok = est is not None and self._n_support(est) >= p.min_inliers
-        if not ok:
-            self.n_lost += 1
-            self._need_restart = True
-            self._velocity = np.eye(4)
-            self._seen = []
-            return TrackingResult(frame.index, frame.timestamp, self._T_last.copy(), STATUS_LOST,
-                                  0 if est is None else int(est.inliers.sum()), n_matches, False, None, self._ref_kf)
+        if est is None:
+            reason = LOST_TOO_FEW_MATCHES
+        else:
+            reason = judge_pose(self._n_support(est), n_matches + (len(lq) if lq is not None else 0),
+                                est.T_cam_world, T_pred_cw, p, check_motion=self._velocity_valid)
+        if reason:
+            return self._not_tracked(frame, reason, 0 if est is None else int(est.inliers.sum()), n_matches)
+        self._n_failed = 0
         T_cw, inliers, info = est.T_cam_world, est.inliers, est.information
         line_matched = ref_lines = None
         if lines is not None:
@@ -406,6 +445,7 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin):
         ref = self._ref_kf
         T_ref_cam = se3_inv(self._T_ref) @ T_wc
         self._after_frame(T_wc, feats, stereo)
+        self._velocity_valid = True
         full_cov = None
         if info is not None:
             try:
