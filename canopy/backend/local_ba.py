@@ -239,12 +239,11 @@ class LocalBundleAdjustmentMixin:
 
     def _edge_chi2(self, values, e_kf, e_lm, uv, ur, stereo, octv, scale) -> np.ndarray:
         """Whitened squared reprojection error of every edge (inf if behind the camera)."""
-        T_cw = {k: se3_inv(values.atPose3(X(k)).matrix()) for k in np.unique(e_kf).tolist()}
-        R = np.stack([T_cw[k][:3, :3] for k in e_kf.tolist()])
-        t = np.stack([T_cw[k][:3, 3] for k in e_kf.tolist()])
+        kfs, kf_inv = np.unique(e_kf, return_inverse=True)
+        T_cw = np.stack([se3_inv(values.atPose3(X(k)).matrix()) for k in kfs.tolist()])
         uniq, inv = np.unique(e_lm, return_inverse=True)
         P = np.array([values.atPoint3(L(l)) for l in uniq.tolist()], float).reshape(-1, 3)[inv]
-        Pc = np.einsum("nij,nj->ni", R, P) + t
+        Pc = np.einsum("nij,nj->ni", T_cw[kf_inv, :3, :3], P) + T_cw[kf_inv, :3, 3]
         z = Pc[:, 2]
         with np.errstate(divide="ignore", invalid="ignore"):
             u = self.calib.fx * Pc[:, 0] / z + self.calib.cx
