@@ -53,7 +53,7 @@ class TrackingParams:
     # Stage 2 (ORB-SLAM TrackLocalMap): re-project the whole local map with the RANSAC pose
     # and search a small circle, then refine the pose on all those matches.
     search_radius_local: float = 4.0    # px at octave 0, scaled by the keypoint's scale
-    map_max_hamming: int = 100          # ORB-SLAM TH_HIGH (SearchByProjection); 75 missed close points
+    map_max_hamming: int = 75           # KITTI uses 100 (ORB-SLAM TH_HIGH): see configs/kitti.yaml
     map_ratio: float = 0.8
     # Landmarks are created from stereo points closer than max_depth_baselines * baseline
     # (there is no two-view triangulation here, so far points are kept too: the stereo
