@@ -12,6 +12,7 @@ Where things are:
 * pose solving (projection search, EPnP RANSAC, motion-only refinement):
   ``canopy.frontend.map_tracking.MapTrackingMixin``;
 * the keyframe policy (AGRI Eq. 6-7 and ORB-SLAM's conditions): ``canopy.frontend.keyframe_policy``;
+* trust in a pose, lost reasons, the noise-scaled FAST threshold: ``canopy.frontend.track_health``;
 * line features: ``canopy.frontend.tracker_lines.TrackerLinesMixin``.
 """
 from __future__ import annotations
@@ -23,6 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from canopy.frontend.features import Features, OrbExtractor
+from canopy.frontend.keyframe_policy import entropy_ratio, keyframe_reasons
 from canopy.frontend.geometry import (differential_entropy, pose_information, se3_inv, stereo_pose_jacobian,
                                       transform)
 from canopy.frontend.map_tracking import MapTrackingMixin
@@ -402,7 +404,7 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin):
         n_ref = int(from_ref.sum())
         if ref_lines is not None:  # the keyframe's own lines constrain the motion too
             n_ref += p.line_weight_in_count * int(ref_lines.sum())
-        entropy = ratio = None
+        entropy = None
         if n_ref >= p.min_inliers:
             # uncertainty of the motion relative to the last keyframe: the pose information
             # carried by the keyframe's own landmarks (DVO-SLAM: frame-to-keyframe alignment)
@@ -420,23 +422,12 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin):
         if self._frames_since_kf == 1:
             self._entropy_first = entropy
             self._ref_tracked_first = n_ref
-        if entropy is not None and self._entropy_first is not None and np.isfinite(entropy) and self._entropy_first < 0:
-            # Eq. 7: alpha = H(T_k:k+j) / H(T_k:k+1); entropies are negative for a well
-            # constrained pose, so the ratio falls as the uncertainty grows with distance.
-            ratio = float(entropy / self._entropy_first)
+        ratio = entropy_ratio(entropy, self._entropy_first)
         close = self._close(stereo)
         n_tracked_close = int((close[r] & inliers).sum())
         n_new_close = int(close.sum()) - n_tracked_close
         since = self._frames_since_kf
-        reasons = []
-        if ratio is not None and ratio < p.entropy_ratio_alpha:
-            reasons.append("entropy")
-        if since >= p.max_frames_between_keyframes:
-            reasons.append("max_frames")
-        if self._ref_tracked_first is not None and n_ref < p.min_tracked_fraction * self._ref_tracked_first:
-            reasons.append("tracked_fraction")
-        if n_tracked_close < p.min_tracked_close and n_new_close > p.min_new_close_points:
-            reasons.append("close_points")  # ORB-SLAM2 stereo: few tracked close points, many new ones
+        reasons = keyframe_reasons(p, since, ratio, n_ref, self._ref_tracked_first, n_tracked_close, n_new_close)
         need = bool(reasons)
         is_kf = need and since >= p.min_frames_between_keyframes
         kf = self._make_keyframe(frame, feats, stereo, T_wc, matched_ids, lines=lines,
