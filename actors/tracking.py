@@ -42,7 +42,7 @@ class TrackingActor(Actor):
                                   and enh.method in ADAPTIVE_FAST_METHODS)
         self.fast_omega = float(getattr(enh, "fast_omega", 128.0)) if enh is not None else 128.0
         self.fast_min_keypoints = int(getattr(enh, "min_keypoints", 0)) if enh is not None else 0
-        self.counts = {"ok": 0, "lost": 0, "init": 0, "keyframes": 0}
+        self.counts = {"ok": 0, "lost": 0, "init": 0, "predicted": 0, "keyframes": 0}
         self.loop_epoch = 0  # loop corrections received from local mapping
 
     def _apply_update(self, update: LocalMapUpdate) -> None:
@@ -86,6 +86,8 @@ class TrackingActor(Actor):
         else:
             res = self.tracker.track(frame)
         self.counts[res.status] = self.counts.get(res.status, 0) + 1
+        if res.lost_reason:
+            self.counts[f"lost_reason_{res.lost_reason}"] = self.counts.get(f"lost_reason_{res.lost_reason}", 0) + 1
         if res.is_keyframe:
             self.counts["keyframes"] += 1
             res.keyframe.loop_epoch = self.loop_epoch
@@ -103,7 +105,8 @@ class TrackingActor(Actor):
                          is_keyframe=bool(res.is_keyframe), ref_keyframe=int(ref),
                          T_ref_cam=T_ref_cam, timings_ms=timings, sent_at=time.time(),
                          enhancement={k: v for k, v in handle.info.items() if k != "enhance_ms"},
-                         n_lines=int(res.n_lines), n_line_inliers=int(res.n_line_inliers))
+                         n_lines=int(res.n_lines), n_line_inliers=int(res.n_line_inliers),
+                         lost_reason=res.lost_reason)
         for reason, n in res.line_rejected.items():  # degenerate segments, counted never fatal
             self.counts[f"lines_rejected_{reason}"] = self.counts.get(f"lines_rejected_{reason}", 0) + n
         ctx.publish(pose)

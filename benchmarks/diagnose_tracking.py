@@ -6,7 +6,9 @@ the actors use) and prints ATE (SE(3)-aligned), path-length error, keyframe coun
 time p50, and per-frame translation of the estimated vs ground-truth motion (the scale
 ratio |t_est| / |t_gt| shows a depth bias: > 1 means motion over-estimated).
 
-    PYTHONPATH=$PWD python benchmarks/diagnose_tracking.py --dataset kitti [--per-frame] [--set tracking.x=1]
+    PYTHONPATH=$PWD python benchmarks/diagnose_tracking.py --dataset kitti [--per-frame] [--set tracking.x=1] [--lines]
+    PYTHONPATH=$PWD python benchmarks/diagnose_tracking.py --dataset synthetic \
+        --path /work/cache/synthetic/day-loop-seed0-full      # a generated sequence (EuRoC layout)
 """
 from __future__ import annotations
 
@@ -35,8 +37,9 @@ def _parse_value(text: str):
         return text
 
 
-def run(dataset: str, path=None, max_frames=None, sets=(), lines=False, preset=None):
-    cfg = with_overrides(load_run_config(dataset if dataset != "synthetic" else "synthetic"), lines=lines or None)
+def run(dataset: str, path=None, max_frames=None, sets=(), lines=False):
+    """In-process lockstep run with the dataset's config and ``section.name=value`` overrides."""
+    cfg = with_overrides(load_run_config(dataset), lines=lines or None)
     tp, mp = cfg.tracking, cfg.mapping
     for s in sets:
         key, val = s.split("=", 1)
@@ -45,11 +48,8 @@ def run(dataset: str, path=None, max_frames=None, sets=(), lines=False, preset=N
             tp = replace(tp, **{name: _parse_value(val)})
         else:
             mp = replace(mp, **{name: _parse_value(val)})
-    if dataset == "synthetic":
-        from canopy.sources import open_source as _open
-        src = _open("euroc", path, max_frames=max_frames)
-    else:
-        src = open_source(dataset, path, max_frames=max_frames)
+    # generated sequences are EuRoC folders with their own config (configs/synthetic.yaml)
+    src = open_source("euroc" if dataset == "synthetic" else dataset, path, max_frames=max_frames)
     res = run_sequential(src, tp, mp)
     return src, res
 

@@ -101,7 +101,7 @@ class FramePose:
     index: int
     timestamp: float
     T_world_cam: np.ndarray
-    status: str               # "init" | "ok" | "lost"
+    status: str               # "init" | "ok" | "predicted" (motion model bridging a gap) | "lost"
     n_inliers: int
     n_matches: int
     is_keyframe: bool
@@ -112,9 +112,7 @@ class FramePose:
     enhancement: dict = field(default_factory=dict)  # method used, image statistics before/after
     n_lines: int = 0            # left segments detected (0 without --lines)
     n_line_inliers: int = 0     # line matches kept by the pose refinement
-    # Why a frame has no estimated pose (status "lost"), e.g. "too few inliers"; "" when tracked.
-    # T_world_cam of such a frame is a placeholder and never written to a trajectory.
-    reason: str = ""
+    lost_reason: str = ""       # why a "predicted" / "lost" frame has no tracked pose ("" when tracked)
 
 
 @message("map_snapshot")

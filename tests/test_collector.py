@@ -10,7 +10,7 @@ def _pose(i, status="ok", reason=""):
     T[0, 3] = 0.1 * i
     return FramePose(index=i, timestamp=10.0 + 0.1 * i, T_world_cam=T, status=status, n_inliers=50,
                      n_matches=60, is_keyframe=i == 0, ref_keyframe=-1, T_ref_cam=np.eye(4),
-                     reason=reason)
+                     lost_reason=reason)
 
 
 def _collect(tmp_path, statuses, n_frames, missing=()):

@@ -251,3 +251,106 @@ def test_adaptive_fast_fallback_recovers_corners_on_a_dark_frame():
     # enough corners: the fallback is not used
     bright = open_source("euroc").frame(0).left
     assert len(ex.extract(bright, 20, 1, min_keypoints=10).uv) == len(ex.extract(bright, 20).uv)
+
+
+# ------------------------------------------------------------------ trust in a pose (issue 9)
+def _wall_sequence(n, step=0.04):
+    rng = np.random.default_rng(8)
+    texture = textured_image(rng, 1600, 1600, blur=2.0)
+    poses = [se3_exp(np.array([0.0, 0.0, 0.0, step * i, 0.0, 0.02 * i])) for i in range(n)]
+    return texture, poses
+
+
+def test_blank_frames_are_predicted_then_lost_with_a_reason_never_tracked():
+    from canopy.frontend import STATUS_LOST, STATUS_PREDICTED
+    from canopy.frontend.track_health import LOST_REASONS
+
+    texture, poses = _wall_sequence(9)
+    tracker = Tracker(CALIB, TrackingParams(max_predicted_frames=2))
+    blank = np.zeros((CALIB.height, CALIB.width), np.uint8)
+    statuses, reasons = [], []
+    for i, T in enumerate(poses):
+        if 3 <= i <= 5:
+            frame = StereoFrame(i, 0.05 * i, blank, blank)
+        else:
+            frame = StereoFrame(i, 0.05 * i, render_wall(texture, T, CALIB), render_wall(texture, T, CALIB, right=True))
+        res = tracker.track(frame)
+        statuses.append(res.status)
+        reasons.append(res.lost_reason)
+        if res.status == STATUS_PREDICTED:
+            # the motion model continues the constant velocity: honest only for a short gap
+            assert np.linalg.norm(res.T_world_cam[:3, 3] - T[:3, 3]) < 0.02, i
+    assert statuses[:3] == ["init", "ok", "ok"]
+    assert statuses[3:6] == [STATUS_PREDICTED, STATUS_PREDICTED, STATUS_LOST]
+    assert all(r in LOST_REASONS for r in reasons[3:6]) and not any(reasons[:3])
+    assert statuses[6] == "init" and statuses[7:] == ["ok", "ok"]  # a new map segment, tracked again
+    assert tracker.n_lost == 1 and tracker.n_predicted == 2
+
+
+def test_a_pose_far_from_the_motion_model_is_rejected():
+    from canopy.frontend.track_health import (LOST_INCONSISTENT_MOTION, LOST_LOW_INLIER_FRACTION,
+                                              LOST_TOO_FEW_INLIERS, judge_pose)
+
+    p = TrackingParams()
+    T_pred = se3_exp(np.array([0.0, 0.0, 0.0, 0.0, 0.0, 1.0]))
+    near = se3_exp(np.array([0.0, 0.01, 0.0, 0.05, 0.0, 1.1]))
+    jump = se3_exp(np.array([0.0, 0.0, 0.0, 0.0, 0.0, 1.0 + 2 * p.max_motion_deviation_m]))
+    turn = se3_exp(np.array([0.0, np.radians(2 * p.max_motion_deviation_deg), 0.0, 0.0, 0.0, 1.0]))
+    assert judge_pose(200, 250, near, T_pred, p, check_motion=True) == ""
+    assert judge_pose(200, 250, jump, T_pred, p, check_motion=True) == LOST_INCONSISTENT_MOTION
+    assert judge_pose(200, 250, turn, T_pred, p, check_motion=True) == LOST_INCONSISTENT_MOTION
+    assert judge_pose(200, 250, jump, T_pred, p, check_motion=False) == ""  # no motion model yet
+    assert judge_pose(p.min_inliers - 1, 250, near, T_pred, p, check_motion=True) == LOST_TOO_FEW_INLIERS
+    assert judge_pose(30, 1000, near, T_pred, p, check_motion=True) == LOST_LOW_INLIER_FRACTION
+
+
+def test_noise_estimate_and_noise_scaled_fast_threshold():
+    from canopy.frontend.track_health import image_noise_sigma
+
+    rng = np.random.default_rng(3)
+    smooth = textured_image(rng, 480, 640, blur=6.0).astype(np.float64)
+    for sigma in (4.0, 12.0):
+        noisy = np.clip(smooth + rng.normal(0, sigma, smooth.shape), 0, 255).astype(np.uint8)
+        assert abs(image_noise_sigma(noisy) - sigma) < 0.2 * sigma + 1.0, sigma
+    # a noisy frame: the FAST threshold rises with the noise, so fewer corners come from noise
+    noisy = np.clip(smooth + rng.normal(0, 15.0, smooth.shape), 0, 255).astype(np.uint8)
+    on = Tracker(CALIB, TrackingParams(fast_noise_factor=3.0)).track(StereoFrame(0, 0.0, noisy, noisy))
+    off = Tracker(CALIB, TrackingParams(fast_noise_factor=0.0)).track(StereoFrame(0, 0.0, noisy, noisy))
+    assert on.noise_sigma is not None and 3.0 * on.noise_sigma > TrackingParams().fast_threshold
+    assert "noise_estimate" in on.timings and off.noise_sigma is None
+
+
+# ------------------------------------------------------------------ disparity offset of the rig
+def test_disparity_offset_is_recovered_from_two_frames_without_ground_truth():
+    from canopy.frontend.disparity_offset import estimate_disparity_offset
+
+    rng = np.random.default_rng(5)
+    P1 = random_points(rng, 400, 3.0, 40.0)
+    T21 = se3_exp(np.array([0.0, 0.01, 0.0, 0.05, 0.0, -1.0]))  # forward 1 m
+    P2 = P1 @ T21[:3, :3].T + T21[:3, 3]
+    true_offset = 0.3
+
+    def observe(P):
+        pred, _ = project_stereo(np.eye(4), P, CALIB)
+        d = pred[:, 0] - pred[:, 2] - true_offset + rng.normal(0, 0.1, len(P))
+        return pred[:, :2] + rng.normal(0, 0.1, (len(P), 2)), d
+
+    uv1, d1 = observe(P1)
+    uv2, d2 = observe(P2)
+    sig = np.ones(len(P1))
+    delta, sd, T = estimate_disparity_offset(uv1, d1, sig, uv2, d2, sig, np.eye(4), CALIB)
+    assert abs(delta - true_offset) < 0.05 and sd < 0.1
+    assert np.linalg.norm(T[:3, 3] - T21[:3, 3]) < 0.01
+    # no motion: the offset cancels and the estimate says so
+    _, sd_static, _ = estimate_disparity_offset(uv1, d1, sig, uv1, d1, sig, np.eye(4), CALIB)
+    assert not sd_static < 1.0
+    # the configured offset moves every disparity (match_stereo)
+    img = textured_image(rng, CALIB.height, CALIB.width)
+    right = np.roll(img, -8, axis=1)
+    ex = OrbExtractor(TrackingParams())
+    L, R = ex.extract(img), ex.extract(right)
+    a = match_stereo(L, R, img, right, CALIB, TrackingParams())
+    b = match_stereo(L, R, img, right, CALIB, TrackingParams(disparity_offset_px=0.5))
+    both = a.valid & b.valid
+    assert both.sum() > 50
+    np.testing.assert_allclose((L.uv[both, 0] - b.u_right[both]) - (L.uv[both, 0] - a.u_right[both]), 0.5, atol=1e-3)

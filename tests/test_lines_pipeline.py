@@ -274,9 +274,13 @@ def test_line_fields_cross_the_wire():
 # ------------------------------------------------------------------ real data
 @pytest.fixture(scope="module")
 def kitti_runs():
+    from canopy.config import load_run_config, with_overrides
+
     src = open_source("kitti")
-    off = run_sequential(src, TrackingParams(), MappingParams())
-    on = run_sequential(src, TrackingParams(use_lines=True), MappingParams(use_lines=True))
+    cfg = load_run_config("kitti")
+    off = run_sequential(src, cfg.tracking, cfg.mapping)
+    cfg_on = with_overrides(cfg, lines=True)
+    on = run_sequential(src, cfg_on.tracking, cfg_on.mapping)
     return src, off, on
 
 
@@ -285,8 +289,11 @@ def test_kitti06_with_lines_tracks_all_frames_no_worse_than_points(kitti_runs):
     assert on.n_frames == 51 and "lost" not in on.statuses and on.n_lost == 0
     ate_off = ape(off.trajectory.poses, src.ground_truth.poses, align="se3")["rmse"]
     ate_on = ape(on.trajectory.poses, src.ground_truth.poses, align="se3")["rmse"]
-    assert ate_on <= ate_off + 0.05, (ate_on, ate_off)
+    assert ate_on <= ate_off, (ate_on, ate_off)
     assert on.map_lines.ndim == 3 and on.map_lines.shape[1:] == (2, 3) and len(on.map_lines) > 50
+    # line landmarks keep their extent (BA used to drift 76 % of them to points shorter than 1 cm)
+    length = np.linalg.norm(on.map_lines[:, 0] - on.map_lines[:, 1], axis=1)
+    assert np.median(length) >= 0.3 and np.mean(length < 0.01) < 0.05, (np.median(length), np.mean(length < 0.01))
     assert off.map_lines.shape == (0, 2, 3)
     assert on.timing_summary()["tracking.line_match"]["n"] >= 50
 

@@ -14,8 +14,12 @@ from canopy.sources import open_source
 
 @pytest.fixture(scope="module")
 def kitti_run():
+    """KITTI 06 with the shipped config (configs/kitti.yaml: 2000 features, the rig's disparity offset)."""
+    from canopy.config import load_run_config
+
+    cfg = load_run_config("kitti")
     src = open_source("kitti")
-    return src, run_sequential(src, TrackingParams(), MappingParams())
+    return src, run_sequential(src, cfg.tracking, cfg.mapping)
 
 
 @pytest.fixture(scope="module")
@@ -24,15 +28,16 @@ def euroc_run():
     return src, run_sequential(src, TrackingParams(), MappingParams())
 
 
-def test_kitti06_all_frames_tracked_and_ate_below_half_metre(kitti_run):
+def test_kitti06_all_frames_tracked_ate_and_path_length_at_orbslam3_level(kitti_run):
     src, res = kitti_run
     assert res.n_frames == len(src) == 51
-    assert "lost" not in res.statuses and res.n_lost == 0
+    assert set(res.statuses) <= {"init", "ok"} and res.n_lost == 0
     assert src.ground_truth is not None
     ate = ape(res.trajectory.poses, src.ground_truth.poses, align="se3")["rmse"]
-    assert ate < 0.5, ate
-    # the estimate really moved with the car (~60 m), it is not a collapsed trajectory
-    assert abs(res.trajectory.path_length() - src.ground_truth.path_length()) < 3.0
+    assert ate < 0.08, ate  # ORB-SLAM3 0.051-0.071 m on these frames; Canopy 0.051 m (was 0.151 m)
+    # path length within 1 % of the ground truth (~60 m): no scale bias from the stereo depth
+    gt_len = src.ground_truth.path_length()
+    assert abs(res.trajectory.path_length() - gt_len) < 0.01 * gt_len
     assert len(res.keyframe_trajectory) == len(res.keyframe_indices) >= 2
     assert res.map_points.shape[1] == 3 and len(res.map_points) > 1000
 

@@ -100,6 +100,33 @@ def line_projection_measurements(T_wc: np.ndarray, P_w: np.ndarray, coeffs: np.n
     return foot, info
 
 
+def line_endpoint_measurements(T_wc: np.ndarray, A_w: np.ndarray, B_w: np.ndarray, coeffs: np.ndarray,
+                               segs: np.ndarray, calib: StereoCalibration, right: np.ndarray, sigma: float,
+                               sigma_along: float):
+    """Measurements of both endpoints of every line observation: the observed segment's own
+    endpoints (each landmark endpoint takes the one its projection is nearer to, the pairing
+    with the smaller total distance), with the information of ``line_projection_measurements``
+    (tight across the observed line, ``sigma_along`` px along it).
+
+    The feet of the perpendiculars hold the endpoints only across the line: along it nothing
+    remembers where the segment was seen, BA after BA lets both endpoints drift along their 3D
+    line, and on KITTI 06 76 % of the map lines ended shorter than 1 cm. Tying each endpoint
+    loosely to an observed endpoint keeps the landmark's extent where the images see it.
+    Observations without a segment (NaN) fall back to the feet. Returns ((2,N,2) A and B
+    measurements, (N,2,2) information).
+    """
+    footA, info = line_projection_measurements(T_wc, A_w, coeffs, calib, right, sigma, sigma_along)
+    footB, _ = line_projection_measurements(T_wc, B_w, coeffs, calib, right, sigma, sigma_along)
+    p1, p2 = segs[:, :2], segs[:, 2:]
+    straight = np.linalg.norm(footA - p1, axis=1) + np.linalg.norm(footB - p2, axis=1)
+    swapped = np.linalg.norm(footA - p2, axis=1) + np.linalg.norm(footB - p1, axis=1)
+    swap = (swapped < straight)[:, None]
+    mA = np.where(swap, p2, p1)
+    mB = np.where(swap, p1, p2)
+    have = np.isfinite(segs).all(axis=1)[:, None]
+    return np.stack([np.where(have, mA, footA), np.where(have, mB, footB)]), info
+
+
 def line_projection_factors(pose_keys, point_keys, feet, infos, right, K: gtsam.Cal3_S2,
                             calib: StereoCalibration, huber: float) -> list:
     """One ``GenericProjectionFactorCal3_S2`` per endpoint observation (see module doc)."""

@@ -10,7 +10,8 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
-from canopy.backend.line_factors import line_custom_factor, line_projection_factors, line_projection_measurements, right_shift
+from canopy.backend.line_factors import (line_custom_factor, line_endpoint_measurements, line_projection_factors,
+                                         right_shift)
 from canopy.frontend.geometry import se3_inv
 
 X = gtsam.symbol_shorthand.X
@@ -69,7 +70,7 @@ class LocalBundleAdjustmentMixin:
         for lid in lm_ids:
             values.insert(L(lid), self.landmarks[lid].position)
         if lines is not None:
-            l_kf, l_id, l_coef, l_right = lines
+            l_kf, l_id, l_coef, l_right, l_seg = lines
             for lid in np.unique(l_id).tolist():
                 values.insert(EA(lid), self.lines[lid].endpoints[0])
                 values.insert(EB(lid), self.lines[lid].endpoints[1])
@@ -95,7 +96,7 @@ class LocalBundleAdjustmentMixin:
             if lines is not None:
                 l_active = self._line_edges_constrained(l_kf, l_id, l_right, ~(l_out | l_gated))
                 self._add_line_factors(graph, values, l_kf[l_active], l_id[l_active], l_coef[l_active],
-                                       l_right[l_active])
+                                       l_right[l_active], l_seg[l_active])
             lm_params = gtsam.LevenbergMarquardtParams()
             lm_params.setMaxIterations(p.ba_iterations)
             if lines is not None:
@@ -139,7 +140,7 @@ class LocalBundleAdjustmentMixin:
         image too: left views alone leave the endpoints' depth free when the camera stands still
         or moves in the line's plane, an indeterminate system that LM only damps, slowly."""
         ids = sorted({lid for k in local for lid in self.keyframes[k].line_landmark.tolist() if lid >= 0})
-        e_kf, e_id, e_coef, e_right = [], [], [], []
+        e_kf, e_id, e_coef, e_right, e_seg = [], [], [], [], []
         for lid in ids:
             for k, j in self.lines[lid].obs.items():
                 if k not in kf_set:
@@ -149,13 +150,15 @@ class LocalBundleAdjustmentMixin:
                 e_id.append(lid)
                 e_coef.append(kf.line_coeffs[j])
                 e_right.append(False)
+                e_seg.append(kf.line_segments[j])
                 if np.isfinite(kf.line_coeffs_right[j]).all():
                     e_kf.append(k)
                     e_id.append(lid)
                     e_coef.append(kf.line_coeffs_right[j])
                     e_right.append(True)
+                    e_seg.append(kf.line_segments_right[j])
         edges = (np.asarray(e_kf, np.int64), np.asarray(e_id, np.int64), np.asarray(e_coef, float).reshape(-1, 3),
-                 np.asarray(e_right, bool))
+                 np.asarray(e_right, bool), np.asarray(e_seg, float).reshape(-1, 4))
         keep = self._line_edges_constrained(edges[0], edges[1], edges[3], np.ones(len(edges[0]), bool))
         return tuple(a[keep] for a in edges)
 
@@ -172,7 +175,7 @@ class LocalBundleAdjustmentMixin:
         ok = (n_kf >= self.params.line_ba_min_keyframes) & (n_right >= 1)
         return usable & ok[inv]
 
-    def _add_line_factors(self, graph, values, l_kf, l_id, l_coef, l_right) -> None:
+    def _add_line_factors(self, graph, values, l_kf, l_id, l_coef, l_right, l_seg) -> None:
         p = self.params
         if len(l_kf) == 0:
             return
@@ -183,12 +186,13 @@ class LocalBundleAdjustmentMixin:
             return
         T_wc = {k: values.atPose3(X(k)).matrix() for k in np.unique(l_kf).tolist()}
         T = np.stack([T_wc[k] for k in l_kf.tolist()])
+        A = np.array([values.atPoint3(EA(lid)) for lid in l_id.tolist()], float).reshape(-1, 3)
+        B = np.array([values.atPoint3(EB(lid)) for lid in l_id.tolist()], float).reshape(-1, 3)
+        meas, infos = line_endpoint_measurements(T, A, B, l_coef, l_seg, self.calib, l_right, p.line_sigma,
+                                                 p.line_sigma_along)
         for which, key in ((0, EA), (1, EB)):
-            P = np.array([values.atPoint3(key(lid)) for lid in l_id.tolist()], float).reshape(-1, 3)
-            feet, infos = line_projection_measurements(T, P, l_coef, self.calib, l_right, p.line_sigma,
-                                                       p.line_sigma_along)
             for f in line_projection_factors([X(k) for k in l_kf.tolist()], [key(lid) for lid in l_id.tolist()],
-                                             feet, infos, l_right, self._Kmono, self.calib, p.huber_line):
+                                             meas[which], infos, l_right, self._Kmono, self.calib, p.huber_line):
                 graph.add(f)
 
     def _line_noise(self):
@@ -235,12 +239,11 @@ class LocalBundleAdjustmentMixin:
 
     def _edge_chi2(self, values, e_kf, e_lm, uv, ur, stereo, octv, scale) -> np.ndarray:
         """Whitened squared reprojection error of every edge (inf if behind the camera)."""
-        T_cw = {k: se3_inv(values.atPose3(X(k)).matrix()) for k in np.unique(e_kf).tolist()}
-        R = np.stack([T_cw[k][:3, :3] for k in e_kf.tolist()])
-        t = np.stack([T_cw[k][:3, 3] for k in e_kf.tolist()])
+        kfs, kf_inv = np.unique(e_kf, return_inverse=True)
+        T_cw = np.stack([se3_inv(values.atPose3(X(k)).matrix()) for k in kfs.tolist()])
         uniq, inv = np.unique(e_lm, return_inverse=True)
         P = np.array([values.atPoint3(L(l)) for l in uniq.tolist()], float).reshape(-1, 3)[inv]
-        Pc = np.einsum("nij,nj->ni", R, P) + t
+        Pc = np.einsum("nij,nj->ni", T_cw[kf_inv, :3, :3], P) + T_cw[kf_inv, :3, 3]
         z = Pc[:, 2]
         with np.errstate(divide="ignore", invalid="ignore"):
             u = self.calib.fx * Pc[:, 0] / z + self.calib.cx

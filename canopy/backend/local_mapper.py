@@ -148,7 +148,9 @@ class LocalMapper(LocalBundleAdjustmentMixin):
     def _insert_lines(self, kf: KeyframeData, rec: Keyframe) -> None:
         """Line observations of existing line landmarks, and new lines from stereo endpoints."""
         n = len(kf.line_ids)
-        rec.line_coeffs = line_coefficients(np.asarray(kf.line_segments, np.float64).reshape(-1, 4))
+        rec.line_segments = np.asarray(kf.line_segments, np.float64).reshape(-1, 4)
+        rec.line_segments_right = np.asarray(kf.line_segments_right, np.float64).reshape(-1, 4)
+        rec.line_coeffs = line_coefficients(rec.line_segments)
         with np.errstate(invalid="ignore"):
             rec.line_coeffs_right = line_coefficients(np.asarray(kf.line_segments_right, np.float64).reshape(-1, 4))
         rec.line_descriptors = np.asarray(kf.line_descriptors, np.uint8).reshape(-1, 32)

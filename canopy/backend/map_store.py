@@ -27,6 +27,9 @@ class Keyframe:
     # line observations (empty without lines): infinite lines of the left / right segments
     line_coeffs: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     line_coeffs_right: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # NaN: no stereo
+    # the observed segments (x1, y1, x2, y2) px: their endpoints hold the landmark's extent in BA
+    line_segments: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    line_segments_right: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))  # NaN: no stereo
     line_descriptors: np.ndarray = field(default_factory=lambda: np.zeros((0, 32), np.uint8))
     line_landmark: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 

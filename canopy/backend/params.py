@@ -33,14 +33,15 @@ class MappingParams:
     # line; also in the right image where the keyframe matched the line in stereo).
     use_lines: bool = False
     line_max_growth: float = 1.0        # a new observation may extend a line landmark by at most this x its length
-    # "projection": one GenericProjectionFactor per endpoint whose measurement is the foot of
-    # the perpendicular on the observed line, with a noise model tight along the line normal
-    # (line_sigma) and loose along the line (line_sigma_along): its whitened error is Eq. 10
-    # up to the tiny along-line term, and it runs in C++. "custom": gtsam.CustomFactor with
-    # the exact Eq. 10 residual and analytic Jacobians (Python callback; slower).
+    # "projection": one GenericProjectionFactor per endpoint whose measurement is the observed
+    # segment's nearer endpoint (line_factors.line_endpoint_measurements), with a noise model
+    # tight along the line normal (line_sigma: Eq. 10) and loose along the line
+    # (line_sigma_along), which keeps the landmark's extent where the images see it instead of
+    # letting the endpoints drift along the 3D line; it runs in C++. "custom": gtsam.CustomFactor
+    # with the exact Eq. 10 residual only (extent free) and analytic Jacobians (Python callback).
     line_factor: str = "projection"
     line_sigma: float = 1.0              # px, per endpoint-to-line distance
-    line_sigma_along: float = 1e3        # px, along the observed line ("projection" only)
+    line_sigma_along: float = 40.0       # px, endpoint along the observed line ("projection" only)
     huber_line: float = math.sqrt(CHI2_95_2DOF)
     chi2_line: float = CHI2_95_2DOF      # line observation outlier threshold after BA
     line_min_observations: int = 2       # keyframes that must see a line once it is old enough

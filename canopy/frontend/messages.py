@@ -19,7 +19,7 @@ class TrackingResult:
     index: int
     timestamp: float
     T_world_cam: np.ndarray
-    status: str                  # "init" | "ok" | "lost"
+    status: str                  # "init" | "ok" | "predicted" (motion model, not tracked) | "lost"
     n_inliers: int
     n_matches: int
     is_keyframe: bool
@@ -38,3 +38,6 @@ class TrackingResult:
     n_line_matches: int = 0      # segments matched to map lines
     n_line_inliers: int = 0      # line matches kept by the pose refinement
     line_rejected: dict = field(default_factory=dict)  # degenerate segments dropped at the boundary, by reason
+    # why the frame has no tracked pose ("" when tracked): one of canopy.frontend.track_health.LOST_REASONS
+    lost_reason: str = ""
+    noise_sigma: float | None = None  # image noise estimate (grey levels) behind the FAST threshold floor

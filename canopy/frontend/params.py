@@ -39,6 +39,10 @@ class TrackingParams:
     subpixel_window: int = 5            # half size of the SAD patch (11x11 as ORB-SLAM2)
     subpixel_search: int = 5            # SAD search +/- px around the descriptor match
     sad_outlier_factor: float = 2.1     # reject SAD > factor * median (1.5 * 1.4 in ORB-SLAM2)
+    # Constant disparity offset of the rectified rig, px: d_true = d_measured + disparity_offset_px
+    # (a right principal point off by a fraction of a pixel). Measure it without ground truth with
+    # benchmarks/calibrate_disparity_offset.py (canopy.frontend.disparity_offset).
+    disparity_offset_px: float = 0.0
 
     # --- temporal matching against the local map -----------------------------------
     # Stage 1 (ORB-SLAM TrackWithMotionModel): project the local map with the constant-velocity
@@ -49,7 +53,7 @@ class TrackingParams:
     # Stage 2 (ORB-SLAM TrackLocalMap): re-project the whole local map with the RANSAC pose
     # and search a small circle, then refine the pose on all those matches.
     search_radius_local: float = 4.0    # px at octave 0, scaled by the keypoint's scale
-    map_max_hamming: int = 75
+    map_max_hamming: int = 75           # KITTI uses 100 (ORB-SLAM TH_HIGH): see configs/kitti.yaml
     map_ratio: float = 0.8
     # Landmarks are created from stereo points closer than max_depth_baselines * baseline
     # (there is no two-view triangulation here, so far points are kept too: the stereo
@@ -72,6 +76,21 @@ class TrackingParams:
     chi2_mono: float = 5.991
     chi2_stereo: float = 7.815
     seed: int = 0                       # RANSAC seed; frame index is added per call
+
+    # --- trust in a pose (canopy.frontend.track_health; issue 9) ------------------------
+    # A refined pose is rejected (frame reported lost, with the reason) when fewer than
+    # min_inlier_fraction of its matches agree with it, or when it departs from the
+    # constant-velocity prediction by more than the deviations below (a wild pose). A rejected
+    # frame within max_predicted_frames of the last tracked one gets the motion-model pose,
+    # reported as "predicted" (not tracked), and the map is kept; after that tracking restarts.
+    min_inlier_fraction: float = 0.2
+    max_motion_deviation_m: float = 2.0
+    max_motion_deviation_deg: float = 20.0
+    max_predicted_frames: int = 2
+    # FAST threshold floor on noisy images: fast_noise_factor x the image noise sigma (Immerkaer
+    # estimate); 0 switches it off. Clean images (the estimate sees fine texture too: 2-6 grey
+    # levels on KITTI, EuRoC and the generated sequences) keep fast_threshold.
+    fast_noise_factor: float = 3.0
 
     # --- keyframe selection (AGRI §3.2.4, Eq. 6-7; Kerl et al. 2013) ---------------
     entropy_ratio_alpha: float = 0.8
@@ -127,6 +146,7 @@ class TrackingParams:
         need(self.row_tolerance >= 0, "row_tolerance", "must be >= 0")
         need(self.subpixel_window >= 1, "subpixel_window", "must be >= 1")
         need(self.subpixel_search >= 1, "subpixel_search", "must be >= 1")
+        need(abs(self.disparity_offset_px) < 5, "disparity_offset_px", "must be within +-5 px")
         need(self.search_radius > 0, "search_radius", "must be > 0")
         need(self.search_radius_wide >= self.search_radius, "search_radius_wide", "must be >= search_radius")
         need(self.search_radius_local > 0, "search_radius_local", "must be > 0")
@@ -137,6 +157,11 @@ class TrackingParams:
         need(self.pnp_iterations > 0, "pnp_iterations", "must be > 0")
         need(0 < self.pnp_confidence < 1, "pnp_confidence", "must be in (0, 1)")
         need(self.min_inliers >= 6, "min_inliers", "must be >= 6 (a pose has 6 DoF)")
+        need(0 <= self.min_inlier_fraction < 1, "min_inlier_fraction", "must be in [0, 1)")
+        need(self.max_motion_deviation_m > 0, "max_motion_deviation_m", "must be > 0")
+        need(self.max_motion_deviation_deg > 0, "max_motion_deviation_deg", "must be > 0")
+        need(self.max_predicted_frames >= 0, "max_predicted_frames", "must be >= 0")
+        need(self.fast_noise_factor >= 0, "fast_noise_factor", "must be >= 0")
         need(self.pixel_sigma > 0, "pixel_sigma", "must be > 0")
         need(self.pose_opt_rounds >= 1, "pose_opt_rounds", "must be >= 1")
         need(self.pose_opt_iterations >= 1, "pose_opt_iterations", "must be >= 1")

@@ -5,7 +5,8 @@ the octave), with a neighbouring octave and a disparity in [min, max]; best Hamm
 distance with a ratio test to the second best; each right keypoint used once; then
 sub-pixel refinement of u_right by SAD patch correlation along the row on the keypoint's
 pyramid level with a parabola fit through the three costs around the minimum; finally
-matches whose SAD exceeds ``sad_outlier_factor`` times the median are rejected.
+matches whose SAD exceeds ``sad_outlier_factor`` times the median are rejected. A calibrated
+constant disparity offset (``disparity_offset_px``) is added to every disparity.
 All steps are batched numpy (candidate pairs via row bands, one loop over pyramid levels).
 """
 from __future__ import annotations
@@ -78,12 +79,17 @@ def subpixel_refine(left_img: np.ndarray, right_img: np.ndarray, uvl: np.ndarray
         if len(sel) == 0:
             continue
         rows = (yl[:, None] + dw[None, :])[:, :, None]                       # (K,P,1)
-        patch_l = il[rows, (xl[:, None] + dw[None, :])[:, None, :]].astype(np.float32)
+        # int16 differences of uint8 pixels, one window shift at a time: the (K,P,P) temporaries
+        # stay in cache (20x faster than one (K,P,2L+1,P) float array; identical sums)
+        patch_l = il[rows, (xl[:, None] + dw[None, :])[:, None, :]].astype(np.int16)
         patch_l -= patch_l[:, w:w + 1, w:w + 1]
-        band = ir[rows, (xr0[:, None] + strip[None, :])[:, None, :]].astype(np.float32)  # (K,P,2L+2w+1)
-        win = np.lib.stride_tricks.sliding_window_view(band, 2 * w + 1, axis=2)  # (K,P,2L+1,P)
-        centre = band[:, w, w:w + 2 * L + 1]  # centre pixel of the window at each shift (K,2L+1)
-        sad = np.abs(win - centre[:, None, :, None] - patch_l[:, :, None, :]).sum(axis=(1, 3))  # (K,2L+1)
+        band = ir[rows, (xr0[:, None] + strip[None, :])[:, None, :]].astype(np.int16)  # (K,P,2L+2w+1)
+        sad = np.empty((len(sel), 2 * L + 1), np.float64)
+        for shift in range(2 * L + 1):
+            # window at this shift minus its centre pixel, minus the centred left patch
+            diff = band[:, :, shift:shift + 2 * w + 1] - band[:, w:w + 1, shift + w:shift + w + 1] - patch_l
+            np.abs(diff, out=diff)
+            sad[:, shift] = diff.reshape(len(sel), -1).sum(axis=1, dtype=np.int32)
         best = np.argmin(sad, axis=1)
         interior = (best > 0) & (best < 2 * L)
         idx = np.arange(len(sel))
@@ -129,6 +135,8 @@ def match_stereo(left: Features, right: Features, left_img: np.ndarray, right_im
                                   right.uv[ri, 0].astype(np.float64), left.octave[li], scale_factors,
                                   params.subpixel_window, params.subpixel_search)
     li, ur, sad = li[ok], ur[ok], sad[ok]
+    # the rig's constant disparity offset (canopy.frontend.disparity_offset): u_right moves with it
+    ur = ur - params.disparity_offset_px
     disp = left.uv[li, 0] - ur
     ok = (disp >= params.min_disparity) & (disp <= max_disp)
     li, ur, sad, disp = li[ok], ur[ok], sad[ok], disp[ok]

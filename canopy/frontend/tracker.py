@@ -12,6 +12,7 @@ Where things are:
 * pose solving (projection search, EPnP RANSAC, motion-only refinement):
   ``canopy.frontend.map_tracking.MapTrackingMixin``;
 * the keyframe policy (AGRI Eq. 6-7 and ORB-SLAM's conditions): ``canopy.frontend.keyframe_policy``;
+* trust in a pose, lost reasons, the noise-scaled FAST threshold: ``canopy.frontend.track_health``;
 * line features: ``canopy.frontend.tracker_lines.TrackerLinesMixin``.
 """
 from __future__ import annotations
@@ -23,6 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from canopy.frontend.features import Features, OrbExtractor
+from canopy.frontend.keyframe_policy import entropy_ratio, keyframe_reasons
 from canopy.frontend.geometry import (differential_entropy, pose_information, se3_inv, stereo_pose_jacobian,
                                       transform)
 from canopy.frontend.map_tracking import MapTrackingMixin
@@ -31,6 +33,8 @@ from canopy.frontend.matching import as_words
 from canopy.frontend.messages import KeyframeData, LocalMapUpdate, TrackingResult
 from canopy.frontend.params import TrackingParams
 from canopy.frontend.stereo import StereoMatches, match_stereo
+from canopy.frontend.track_health import (LOST_TOO_FEW_MATCHES, LOST_TOO_FEW_STEREO, image_noise_sigma,
+                                          judge_pose)
 from canopy.frontend.tracker_lines import TrackerLinesMixin
 from shared.types import StereoCalibration, StereoFrame
 
@@ -38,6 +42,7 @@ if TYPE_CHECKING:
     from canopy.frontend.line_tracking import LineFrame
 
 STATUS_INIT, STATUS_OK, STATUS_LOST = "init", "ok", "lost"
+STATUS_PREDICTED = "predicted"  # no trusted pose: the motion model's, bridging a short gap (lost_reason says why)
 LINE_REJECT_REASONS = ("nan", "zero_length", "outside", "short")  # canopy.lines.detect_segments stats
 
 
@@ -85,6 +90,9 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin):
         self._ref_tracked_first: int | None = None
         self._seen: list[tuple[np.ndarray, np.ndarray]] = []
         self.n_lost = 0
+        self.n_predicted = 0
+        self._n_failed = 0            # consecutive frames without a trusted pose
+        self._velocity_valid = False  # the constant-velocity model has seen two tracked frames
         # line features (issue 4), all inert unless params.use_lines
         self._lines_on = bool(self.params.use_lines)
         if self._lines_on:
@@ -168,6 +176,17 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin):
         timings: dict[str, float] = {}
         t_all = time.perf_counter()
         t0 = time.perf_counter()
+        noise_sigma = None
+        if self.params.fast_noise_factor > 0:
+            # FAST threshold floor from the image noise (track_health): corners from the signal
+            noise_sigma = image_noise_sigma(frame.left)
+            floor = int(round(self.params.fast_noise_factor * noise_sigma))
+            base = self.params.fast_threshold if fast_threshold is None else int(fast_threshold)
+            if floor > base:
+                fast_threshold = min(floor, 254)
+                if fast_fallback is not None:
+                    fast_fallback = max(int(fast_fallback), min(floor, 254) // 2)
+            timings["noise_estimate"] = _ms(t0)
         if self._pool is not None:
             right_job = self._pool.submit(self.extractor_right.extract, frame.right, fast_threshold,
                                           fast_fallback, fast_min_keypoints)
@@ -198,6 +217,7 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin):
         else:
             res = self._track_frame(frame, left, stereo, timings, lines)
         res.n_stereo = n_stereo
+        res.noise_sigma = noise_sigma
         if self._lines_on:
             self._finish_line_jobs(res.is_keyframe)
             timings.update(self._line_timings)
@@ -234,12 +254,14 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin):
             if self._initialised:
                 self._lost_streak += 1
             return TrackingResult(frame.index, frame.timestamp, T_wc, STATUS_LOST, 0, 0, False, None,
-                                  self._ref_kf)
+                                  self._ref_kf, lost_reason=LOST_TOO_FEW_STEREO)
         restart = True
         self._initialised = True
         self._need_restart = False
         self._lost_streak = 0
         self._velocity = np.eye(4)
+        self._velocity_valid = False
+        self._n_failed = 0
         # a new map segment: forget the old view (its landmarks are not connected to this one)
         self._update_view.set(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 32), np.uint8))
         self._provisional.clear()
@@ -295,6 +317,28 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin):
         self._entropy_first = None
         self._ref_tracked_first = None
         return kf
+
+    def _not_tracked(self, frame: StereoFrame, reason: str, n_inliers: int, n_matches: int) -> TrackingResult:
+        """A frame without a trusted pose. Within ``max_predicted_frames`` of the last tracked frame
+        the constant-velocity prediction bridges the gap (status "predicted", the map is kept);
+        after that the frame is lost and the next one restarts a map segment."""
+        self._n_failed += 1
+        if self._n_failed <= self.params.max_predicted_frames:
+            self.n_predicted += 1
+            self._T_last = self._T_last @ self._velocity
+            return TrackingResult(frame.index, frame.timestamp, self._T_last.copy(), STATUS_PREDICTED, n_inliers,
+                                  n_matches, False, None, self._ref_kf, T_ref_cam=se3_inv(self._T_ref) @ self._T_last,
+                                  lost_reason=reason)
+        self.n_lost += 1
+        self._need_restart = True
+        if self._lost_streak == 0:  # first lost frame: keep the motion for the relocalisation bridge
+            self._bridge_velocity = self._velocity.copy()
+            self._lost_streak = 1
+        self._velocity = np.eye(4)
+        self._velocity_valid = False
+        self._seen = []
+        return TrackingResult(frame.index, frame.timestamp, self._T_last.copy(), STATUS_LOST, n_inliers, n_matches,
+                              False, None, self._ref_kf, lost_reason=reason)
 
     def _after_frame(self, T_wc, feats: Features, stereo: StereoMatches) -> None:
         self._velocity = se3_inv(self._T_last) @ T_wc
@@ -356,17 +400,14 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin):
                 est = self._refine(T_cw, X, r, feats, stereo, inliers=inliers, line_obs=line_obs)
         timings["track_local_map"] = _ms(t0)
         n_matches = len(r)
-        ok = est is not None and self._n_support(est) >= p.min_inliers
-        if not ok:
-            self.n_lost += 1
-            self._need_restart = True
-            if self._lost_streak == 0:  # first lost frame: keep the motion for the bridge
-                self._bridge_velocity = self._velocity.copy()
-                self._lost_streak = 1
-            self._velocity = np.eye(4)
-            self._seen = []
-            return TrackingResult(frame.index, frame.timestamp, self._T_last.copy(), STATUS_LOST,
-                                  0 if est is None else int(est.inliers.sum()), n_matches, False, None, self._ref_kf)
+        if est is None:
+            reason = LOST_TOO_FEW_MATCHES
+        else:
+            reason = judge_pose(self._n_support(est), n_matches + (len(lq) if lq is not None else 0),
+                                est.T_cam_world, T_pred_cw, p, check_motion=self._velocity_valid)
+        if reason:
+            return self._not_tracked(frame, reason, 0 if est is None else int(est.inliers.sum()), n_matches)
+        self._n_failed = 0
         T_cw, inliers, info = est.T_cam_world, est.inliers, est.information
         line_matched = ref_lines = None
         if lines is not None:
@@ -392,7 +433,7 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin):
         n_ref = int(from_ref.sum())
         if ref_lines is not None:  # the keyframe's own lines constrain the motion too
             n_ref += p.line_weight_in_count * int(ref_lines.sum())
-        entropy = ratio = None
+        entropy = None
         if n_ref >= p.min_inliers:
             # uncertainty of the motion relative to the last keyframe: the pose information
             # carried by the keyframe's own landmarks (DVO-SLAM: frame-to-keyframe alignment)
@@ -410,23 +451,12 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin):
         if self._frames_since_kf == 1:
             self._entropy_first = entropy
             self._ref_tracked_first = n_ref
-        if entropy is not None and self._entropy_first is not None and np.isfinite(entropy) and self._entropy_first < 0:
-            # Eq. 7: alpha = H(T_k:k+j) / H(T_k:k+1); entropies are negative for a well
-            # constrained pose, so the ratio falls as the uncertainty grows with distance.
-            ratio = float(entropy / self._entropy_first)
+        ratio = entropy_ratio(entropy, self._entropy_first)
         close = self._close(stereo)
         n_tracked_close = int((close[r] & inliers).sum())
         n_new_close = int(close.sum()) - n_tracked_close
         since = self._frames_since_kf
-        reasons = []
-        if ratio is not None and ratio < p.entropy_ratio_alpha:
-            reasons.append("entropy")
-        if since >= p.max_frames_between_keyframes:
-            reasons.append("max_frames")
-        if self._ref_tracked_first is not None and n_ref < p.min_tracked_fraction * self._ref_tracked_first:
-            reasons.append("tracked_fraction")
-        if n_tracked_close < p.min_tracked_close and n_new_close > p.min_new_close_points:
-            reasons.append("close_points")  # ORB-SLAM2 stereo: few tracked close points, many new ones
+        reasons = keyframe_reasons(p, since, ratio, n_ref, self._ref_tracked_first, n_tracked_close, n_new_close)
         need = bool(reasons)
         is_kf = need and since >= p.min_frames_between_keyframes
         kf = self._make_keyframe(frame, feats, stereo, T_wc, matched_ids, lines=lines,
@@ -435,6 +465,7 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin):
         ref = self._ref_kf
         T_ref_cam = se3_inv(self._T_ref) @ T_wc
         self._after_frame(T_wc, feats, stereo)
+        self._velocity_valid = True
         full_cov = None
         if info is not None:
             try:
