@@ -243,6 +243,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--vocabulary", default=None, help="ORB-SLAM3 vocabulary (default: trained and cached)")
     ap.add_argument("--no-pace", action="store_true", help="feed ORB-SLAM3 as fast as it tracks")
     ap.add_argument("--out", type=Path, default=OUT)
+    ap.add_argument("--resume", action="store_true",
+                    help="keep the runs already in --out and skip the (sequence, system) pairs they cover")
     a = ap.parse_args(argv)
     names = a.sequences or (["kitti", "euroc", "haze-row", "dark-rows", "kitti-dark"] if a.quick else
                             ["kitti", "euroc", *PRESETS, *DEGRADED])
@@ -264,9 +266,15 @@ def main(argv: list[str] | None = None) -> int:
               "enhance": a.enhance, "pace": not a.no_pace, "python": platform.python_version(),
               "machine_note": "shared 2-core machine, other work running: timings are noisy"}
     rows = []
+    if a.resume and a.out.is_file():
+        import json
+        rows = json.loads(a.out.read_text()).get("runs", [])
+        print(f"resuming: {len(rows)} runs kept from {a.out}")
+    done = {(r["sequence"], r["system"]) for r in rows}
     for seq in sequences(names, a.quick, progress=True):
         plan = [(s, None) for s in systems if s.startswith("canopy")]
         plan += [(s, rep) for rep in range(reps) for s in systems if s.startswith("orbslam3")]
+        plan = [(s, rep) for s, rep in plan if (seq["name"], s) not in done]
         for system, rep in plan:
             enhance = a.enhance if "+" in system else None
             t0 = time.monotonic()
