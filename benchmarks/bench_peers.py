@@ -137,8 +137,9 @@ def run_canopy(seq: dict, enhance: str | None) -> dict:
         np.ones(len(est), bool)
     row = trajectory_metrics(Trajectory(est.stamps[keep], est.poses[keep]), src.ground_truth, total)
     row["ate_all_frames_m"] = (m.get("ate") or {}).get("rmse")  # Canopy's own metrics.json figure
-    tracked = m["tracking"].get("tracking_success_percent")
-    row.update({"tracked_percent": tracked if tracked is not None else row["tracked_percent"],
+    # over all frames of the sequence: a run that stopped early has not tracked the rest
+    tracked = 100.0 * (m["tracking"]["frames_processed"] - m["tracking"]["frames_lost"]) / total if total else None
+    row.update({"tracked_percent": tracked,
                 "track_ms_p50": s["tracking"]["service_ms"]["p50"], "track_ms_p95": s["tracking"]["service_ms"]["p95"],
                 "fps": m["run"]["frames_per_s"],
                 "cpu_percent": float(sum((a.get("cpu_percent") or {}).get("mean") or 0.0 for a in s.values())),
@@ -209,7 +210,8 @@ def summarise(rows: list[dict]) -> list[dict]:
                                              "track_ms_p95", "fps", "cpu_percent", "frames")},
                       "resets": sum(vals("resets")) if vals("resets") else None,
                       "loops": sum(vals("loops")),
-                      "errors": sum(1 for r in group if r.get("error"))})
+                      "errors": sum(1 for r in group if r.get("error") or r.get("outcome") != "completed"),
+                      "outcomes": sorted({str(r.get("outcome")) for r in group})})
     return table
 
 
@@ -228,7 +230,28 @@ def format_table(table: list[dict], header: dict) -> str:
                      f"{fmt(t['track_ms_p50'], '.1f'):>7s} {fmt(t['track_ms_p95'], '.1f'):>7s} "
                      f"{fmt(t['fps'], '.1f'):>6s} {fmt(t['cpu_percent'], '.0f'):>5s} "
                      f"{'-' if t['resets'] is None else t['resets']:>6} {t['loops']:>5d}"
-                     + (f"  ({t['errors']} run(s) failed)" if t["errors"] else ""))
+                     + (f"  ({t['errors']} run(s) did not complete: {', '.join(t['outcomes'])})"
+                        if t["errors"] else ""))
+    return "\n".join(lines)
+
+
+def format_markdown(table: list[dict], header: dict) -> str:
+    """The table as Markdown (for the README), with the header line above it."""
+    lines = [f"ORB-SLAM3: {header['orbslam3']}; vocabulary: {header['vocabulary']}; cores: {header['cores']}; "
+             f"measured {header['date']}.", "",
+             "| sequence | system | runs | ATE (m) | final ATE (m) | tracked % | path err % | track ms p50 / p95 "
+             "| fps | CPU % | resets | loops |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for t in table:
+        ate = (fmt(t["ate_min_m"]) if t["ate_min_m"] == t["ate_max_m"]
+               else f"{fmt(t['ate_min_m'])}–{fmt(t['ate_max_m'])}")
+        final = ("-" if t["final_ate_min_m"] is None else fmt(t["final_ate_min_m"])
+                 if t["final_ate_min_m"] == t["final_ate_max_m"]
+                 else f"{fmt(t['final_ate_min_m'])}–{fmt(t['final_ate_max_m'])}")
+        note = f" ({t['errors']} incomplete)" if t["errors"] else ""
+        lines.append(f"| {t['sequence']} | {t['system']} | {t['reps']}{note} | {ate} | {final} | "
+                     f"{fmt(t['tracked_percent'], '.1f')} | {fmt(t['path_error_percent'], '+.2f')} | "
+                     f"{fmt(t['track_ms_p50'], '.0f')} / {fmt(t['track_ms_p95'], '.0f')} | {fmt(t['fps'], '.1f')} | "
+                     f"{fmt(t['cpu_percent'], '.0f')} | {'-' if t['resets'] is None else t['resets']} | {t['loops']} |")
     return "\n".join(lines)
 
 
@@ -245,7 +268,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=OUT)
     ap.add_argument("--resume", action="store_true",
                     help="keep the runs already in --out and skip the (sequence, system) pairs they cover")
+    ap.add_argument("--markdown", type=Path, default=None, metavar="JSON",
+                    help="print the Markdown table of a saved run and exit (nothing is run)")
     a = ap.parse_args(argv)
+    if a.markdown is not None:
+        import json
+        saved = json.loads(a.markdown.read_text())
+        print(format_markdown(summarise(saved["runs"]), saved["header"]))
+        return 0
     names = a.sequences or (["kitti", "euroc", "haze-row", "dark-rows", "kitti-dark"] if a.quick else
                             ["kitti", "euroc", *PRESETS, *DEGRADED])
     reps = a.reps if a.reps is not None else (1 if a.quick else 3)
