@@ -257,7 +257,7 @@ def format_markdown(table: list[dict], header: dict) -> str:
     lines = [f"ORB-SLAM3: {header['orbslam3']}; vocabulary: {header['vocabulary']}; cores: {header['cores']}; "
              f"measured {header['date']}.", "",
              "| sequence | system | runs | ATE (m) | final ATE (m) | tracked % | path err % | track ms p50 / p95 "
-             "| fps | CPU % | resets | loops |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| fps | CPU % | resets | loops (all runs) |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for t in table:
         ate = (fmt(t["ate_min_m"]) if t["ate_min_m"] == t["ate_max_m"]
                else f"{fmt(t['ate_min_m'])}–{fmt(t['ate_max_m'])}")
