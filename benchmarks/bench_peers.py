@@ -193,6 +193,7 @@ def run_peer(seq: dict, enhance: str | None, vocabulary: Path, pace: bool) -> di
                 "cpu_percent": 100.0 * r.cpu_s / r.wall_s if r.wall_s else None,
                 "frames": r.total, "resets": r.resets, "loops": r.loops, "wall_s": r.wall_s,
                 "final_ate_rmse_m": final.get("ate_rmse_m"), "error": r.error,
+                "final_trajectory_error": r.meta.get("final_trajectory_error"),
                 "outcome": "error" if r.error else "completed"})
     if r.error:
         row["log_tail"] = r.log_tail
