@@ -209,7 +209,15 @@ def fmt(v, spec=".3f") -> str:
 def summarise(rows: list[dict]) -> list[dict]:
     """One line per (sequence, system): ATE min-max over reps, medians of the rest."""
     table = []
-    for key in dict.fromkeys((r["sequence"], r["system"]) for r in rows):
+    seq_order = ["kitti", "euroc", *PRESETS, *DEGRADED]
+
+    def order(key):
+        seq, system = key
+        base = system.split("+")[0] + ("+enh" if "+" in system else "")
+        return (seq_order.index(seq) if seq in seq_order else len(seq_order), seq,
+                ["canopy", "canopy+enh", "orbslam3", "orbslam3+enh"].index(base))
+
+    for key in sorted(dict.fromkeys((r["sequence"], r["system"]) for r in rows), key=order):
         group = [r for r in rows if (r["sequence"], r["system"]) == key]
 
         def vals(name):
