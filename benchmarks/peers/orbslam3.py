@@ -261,6 +261,13 @@ def _child(result_path: str, log_path: str, sequence, dataset: str, preprocess, 
     deadline = time.monotonic() + SHUTDOWN_WAIT_S
     while not slam.is_shutdown() and time.monotonic() < deadline:
         time.sleep(0.05)
+    cpu = os.times()
+    result = {"stamps": ok_stamps, "poses": ok_poses, "track_ms": track_ms, "total": n, "wall_s": wall,
+              "cpu_s": cpu.user + cpu.system, "final": None, "settings": text}
+    # Written before SaveTrajectoryTUM, which can crash (SIGSEGV seen after ORB-SLAM3 started a
+    # second map on dusk-loop): the online trajectory survives, only the final one is lost.
+    with open(result_path, "wb") as f:
+        pickle.dump(result, f)
     final = None
     try:
         tum = work / "final.tum"
@@ -272,11 +279,10 @@ def _child(result_path: str, log_path: str, sequence, dataset: str, preprocess, 
             final = (rows[:, 0], poses_from_xyz_quat_wxyz(rows[:, 1:4], q_wxyz))
     except Exception as exc:  # the online trajectory is the main result; say why this one is missing
         print(f"[peer] final trajectory not saved: {exc}", flush=True)
-    cpu = os.times()
-    with open(result_path, "wb") as f:
-        pickle.dump({"stamps": ok_stamps, "poses": ok_poses, "track_ms": track_ms, "total": n,
-                     "wall_s": wall, "cpu_s": cpu.user + cpu.system, "final": final,
-                     "settings": text}, f)
+    if final is not None:
+        result["final"] = final
+        with open(result_path, "wb") as f:
+            pickle.dump(result, f)
     os._exit(0)  # skip ORB-SLAM3's static destructors (they can hang after shutdown)
 
 
@@ -313,6 +319,8 @@ def run_stereo(sequence: str | Path | None, dataset: str, *, preprocess: Preproc
         error = f"timed out after {timeout_s:.0f} s"
     elif not result_path.is_file():
         error = f"ORB-SLAM3 child exited with code {proc.exitcode} before writing a result"
+    final_note = (f"child exited with code {proc.exitcode} while saving its final trajectory"
+                  if error is None and proc.exitcode != 0 else None)
     log = log_path.read_text(errors="replace") if log_path.is_file() else ""
     tail = "\n".join(log.splitlines()[-LOG_TAIL_LINES:])
     meta = {"vocabulary": vocab, "sequence": str(src.root), "dataset": dataset, "pace": pace,
@@ -330,6 +338,7 @@ def run_stereo(sequence: str | Path | None, dataset: str, *, preprocess: Preproc
                       meta={"frame": "rectified left camera", "system": "orbslam3"})
     final = Trajectory(*r["final"], meta={"system": "orbslam3", "kind": "final"}) if r["final"] else None
     meta["settings"] = r["settings"]
+    meta["final_trajectory_error"] = final_note
     return PeerResult(traj, len(traj), r["total"], np.asarray(r["track_ms"]), resets, version(), tail,
                       loops=log.count(LOOP_PATTERN), final_trajectory=final, wall_s=r["wall_s"],
                       cpu_s=r["cpu_s"], meta=meta)
