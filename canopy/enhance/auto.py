@@ -35,6 +35,7 @@ import numpy as np
 from canopy.enhance.agcwd import agcwd_unsharp
 from canopy.enhance.common import check_image, luma
 from canopy.enhance.dehaze import dark_channel, dehaze_dark_channel, dehaze_inverted
+from canopy.enhance.noise import denoise, estimate_noise
 from canopy.enhance.params import EnhanceParams
 
 
@@ -77,8 +78,60 @@ _APPLY = {
 }
 
 
-def auto(image: np.ndarray, params: EnhanceParams | None = None) -> tuple[np.ndarray, str]:
-    """Enhance as ``auto_decide`` says; returns (image, decision_name)."""
+def _clipped_fraction(image: np.ndarray) -> float:
+    """Fraction of grey levels at 0 or 255 (on luma)."""
+    grey = luma(image)
+    hist = cv2.calcHist([grey], [0], None, [256], [0, 256]).ravel()
+    return float((hist[0] + hist[255]) / grey.size)
+
+
+def apply_decision(image: np.ndarray, decision: str, params: EnhanceParams,
+                   noise_sigma: float | None = None) -> tuple[np.ndarray, float]:
+    """Apply an ``auto`` decision (one of AUTO_DECISIONS) to ``image``.
+
+    ``X>dn``: method X, then ``denoise`` with the noise σ measured on X's
+    output (or ``noise_sigma`` when given: the right image of a pair gets the
+    left image's σ, so both are smoothed alike). Returns (image, σ used; 0
+    when nothing was denoised).
+    """
+    base, _, post = decision.partition(">")
+    out = _APPLY[base](image, params)
+    if post != "dn":
+        return out, 0.0
+    sigma = estimate_noise(out) if noise_sigma is None else float(noise_sigma)
+    return denoise(out, sigma, params.denoise_radius, params.denoise_eps_factor), sigma
+
+
+def auto_full(image: np.ndarray, params: EnhanceParams | None = None) -> tuple[np.ndarray, str, float]:
+    """``auto`` with its noise step: (image, decision, σ used for denoising or 0).
+
+    1. The base decision of ``auto_decide`` (darkness, haze, contrast).
+    2. Haze guard: the dark channel prior fails on scenes it does not model
+       (large bright surfaces, sky), where it over-darkens and clips. If
+       dehazing clips more than ``auto_dehaze_max_clip`` more of the pixels
+       than the input had, AFE's AGCWD is used instead (it only redistributes
+       grey levels, so it cannot invent a wrong transmission).
+    3. Noise: σ of the treated image (``estimate_noise``; the enhancement has
+       already amplified the noise by its gain, which is what FAST sees). If σ
+       exceeds ``auto_noise_sigma`` grey levels, denoise (decision ``X>dn``).
+       Clean, well-lit frames measure ~1.7–2.2 (texture and the real sensor
+       noise of EuRoC / KITTI / the generated scenes) and stay untouched.
+    """
+    image = check_image(image)
     params = params or EnhanceParams()
     decision, _ = auto_decide(image, params)
-    return _APPLY[decision](check_image(image), params), decision
+    out = _APPLY[decision](image, params)
+    if decision == "dehaze" and \
+            _clipped_fraction(out) - _clipped_fraction(image) > params.auto_dehaze_max_clip:
+        decision = "afe"
+        out = _APPLY[decision](image, params)
+    sigma = estimate_noise(out)
+    if sigma > params.auto_noise_sigma:
+        return denoise(out, sigma, params.denoise_radius, params.denoise_eps_factor), decision + ">dn", sigma
+    return out, decision, 0.0
+
+
+def auto(image: np.ndarray, params: EnhanceParams | None = None) -> tuple[np.ndarray, str]:
+    """Enhance as ``auto`` decides (``auto_full``); returns (image, decision_name)."""
+    out, decision, _ = auto_full(image, params)
+    return out, decision

@@ -26,7 +26,8 @@ from shared.errors import ConfigError
 
 ENHANCE_METHODS = ("none", "he", "clahe", "afe", "agri", "auto")
 # What ``auto`` may decide per frame ("dehaze" = dark channel prior on the image itself).
-AUTO_DECISIONS = ("none", "agri", "dehaze", "afe")
+# "X>dn": X, then the noise-aware denoiser (canopy.enhance.noise).
+AUTO_DECISIONS = ("none", "agri", "dehaze", "afe", "none>dn", "agri>dn", "dehaze>dn", "afe>dn")
 
 
 @dataclass(frozen=True)
@@ -53,6 +54,11 @@ class EnhanceParams:
     auto_bright_mean: float = 200.0  # mean grey above this: over-exposed -> afe
     auto_low_std: float = 28.0       # std (downsampled copy) below this: low contrast
     auto_haze_dark: float = 100.0    # mean dark channel at/above this (with low std): hazy -> dehaze
+    auto_dehaze_max_clip: float = 0.02  # dehazing may clip at most this much more of the frame, else afe
+    auto_noise_sigma: float = 3.0    # noise σ (grey levels) of the treated frame above this: denoise
+    # noise-aware denoising (ours, canopy.enhance.noise): Immerkær/MAD noise σ, self-guided filter
+    denoise_radius: int = 2          # px at full resolution (window 5×5)
+    denoise_eps_factor: float = 2.0  # ε = (factor·σ)²: windows with std below ~2σ count as flat
     # AFE §4.2, Eq. 18–19
     adaptive_fast: bool = True
     fast_omega: float = 128.0
@@ -67,11 +73,12 @@ class EnhanceParams:
 
         for name in ("omega", "t0", "tau", "wd_exponent", "low_contrast_lambda", "usm_alpha",
                      "usm_beta", "usm_sigma", "clahe_clip", "auto_dark_mean", "auto_bright_mean",
-                     "auto_low_std", "auto_haze_dark", "fast_omega"):
+                     "auto_low_std", "auto_haze_dark", "fast_omega", "denoise_eps_factor",
+                     "auto_dehaze_max_clip", "auto_noise_sigma"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
                 bad(name, "must be a finite number")
-        for name in ("block", "n_dark_pixels", "clahe_tiles", "auto_downsample", "min_keypoints"):
+        for name in ("block", "n_dark_pixels", "clahe_tiles", "auto_downsample", "min_keypoints", "denoise_radius"):
             if isinstance(getattr(self, name), bool) or not isinstance(getattr(self, name), int):
                 bad(name, "must be an integer")
         if not isinstance(self.adaptive_fast, bool):
@@ -108,8 +115,16 @@ class EnhanceParams:
                 bad(name, "must be in [0, 255]")
         if not self.auto_dark_mean <= self.auto_bright_mean:
             bad("auto_dark_mean", f"must not exceed auto_bright_mean ({self.auto_bright_mean})")
+        if not 0.0 <= self.auto_dehaze_max_clip <= 1.0:
+            bad("auto_dehaze_max_clip", "must be in [0, 1]")
+        if not self.auto_noise_sigma >= 0.0:
+            bad("auto_noise_sigma", "must be >= 0")
         if not self.auto_low_std >= 0.0:
             bad("auto_low_std", "must be >= 0")
+        if self.denoise_radius < 1:
+            bad("denoise_radius", "must be >= 1")
+        if not self.denoise_eps_factor > 0.0:
+            bad("denoise_eps_factor", "must be > 0")
         if not self.fast_omega > 0.0:
             bad("fast_omega", "must be > 0")
         if self.min_keypoints < 0:
