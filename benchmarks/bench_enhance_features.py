@@ -17,7 +17,8 @@ Candidates: the plain methods; ``dn>X`` = noise-aware denoise
 (``canopy.enhance.noise``) then X; ``X>dn`` = X then denoise; ``auto`` =
 whatever the current ``auto`` decides. All use AFE's adaptive FAST threshold
 (Eq. 18–19), as the tracking actor does for ``afe`` and ``auto``, except
-``none`` (fixed threshold 20, i.e. ``--enhance none``).
+``none`` (fixed threshold 20, i.e. ``--enhance none``) and ``auto@20`` (auto's
+images with the fixed threshold: the config's ``adaptive_fast: false``).
 
 Noise is seeded per frame and camera, so every frame of every sequence sees
 a different noise draw (several seeds).
@@ -88,6 +89,7 @@ def candidates(params: EnhanceParams) -> dict:
     for m in ("clahe", "afe", "agri"):
         out[f"{m}>dn"] = post(m)
     out["auto"] = auto_pair
+    out["auto@20"] = auto_pair  # the same images, scored with the fixed FAST threshold
     return out
 
 
@@ -177,10 +179,11 @@ def main(argv=None) -> int:
             dr = degrade_image(right, cell, rays[1], rng=np.random.default_rng(seed + [1]))
             for name, treat in cands.items():
                 tl, tr = treat(dl, dr)
-                s = score_pair(tl, tr, calib, ref, extractors, tracking, name != "none", args.tol,
+                s = score_pair(tl, tr, calib, ref, extractors, tracking,
+                               name != "none" and not name.endswith("@20"), args.tol,
                                params.fast_omega)
                 row = {"sequence": seq, "frame": idx, "cell": cell.label, "candidate": name, **s}
-                if name == "auto":
+                if name.startswith("auto"):
                     row["decision"] = auto(dl, params)[1]
                     row["noise_sigma_in"] = estimate_noise(dl)
                 rows.append(row)

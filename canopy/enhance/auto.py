@@ -21,6 +21,11 @@ Decision, first rule that fires:
    both dimmed and bright frames, via the negative image for the latter).
 4. otherwise                                              -> ``none``.
 
+Then the noise step (``auto_full``): a guard against dehazing what the
+dark channel prior does not model, and the noise-aware denoiser
+(``canopy.enhance.noise``) after the enhancement when the treated frame's
+noise σ says FAST would fire on noise; the decision becomes ``X>dn``.
+
 On the real data here (statistics at 1/4 scale): EuRoC V1_01 (mean 145,
 std 53) and KITTI 06 (93, 60) and the O-HAZE clear references (101–103,
 30–43) stay ``none``; the O-HAZE hazy photos (140–143, std 15–20, dark
@@ -114,8 +119,15 @@ def auto_full(image: np.ndarray, params: EnhanceParams | None = None) -> tuple[n
     3. Noise: σ of the treated image (``estimate_noise``; the enhancement has
        already amplified the noise by its gain, which is what FAST sees). If σ
        exceeds ``auto_noise_sigma`` grey levels, denoise (decision ``X>dn``).
-       Clean, well-lit frames measure ~1.7–2.2 (texture and the real sensor
+       Clean, well-lit frames measure 1.7–2.7 (texture and the real sensor
        noise of EuRoC / KITTI / the generated scenes) and stay untouched.
+       Under-exposed frames (``agri``) are always denoised, with σ at least
+       ``auto_dark_min_sigma``: at a few grey levels of signal the frame is
+       quantised as much as it is noisy, the MAD estimate then sees flat
+       steps (σ 2.5 on a frame at 2 % light whose noise ``agri`` has raised
+       ten-fold), and on the degradation grid ``agri>dn`` found more correct
+       stereo matches than ``agri`` in every dark cell
+       (``benchmarks/bench_enhance_features.py``).
     """
     image = check_image(image)
     params = params or EnhanceParams()
@@ -126,7 +138,9 @@ def auto_full(image: np.ndarray, params: EnhanceParams | None = None) -> tuple[n
         decision = "afe"
         out = _APPLY[decision](image, params)
     sigma = estimate_noise(out)
-    if sigma > params.auto_noise_sigma:
+    if decision == "agri":
+        sigma = max(sigma, params.auto_dark_min_sigma)
+    if decision == "agri" or sigma > params.auto_noise_sigma:
         return denoise(out, sigma, params.denoise_radius, params.denoise_eps_factor), decision + ">dn", sigma
     return out, decision, 0.0
 

@@ -55,7 +55,8 @@ class EnhanceParams:
     auto_low_std: float = 28.0       # std (downsampled copy) below this: low contrast
     auto_haze_dark: float = 100.0    # mean dark channel at/above this (with low std): hazy -> dehaze
     auto_dehaze_max_clip: float = 0.02  # dehazing may clip at most this much more of the frame, else afe
-    auto_noise_sigma: float = 3.0    # noise σ (grey levels) of the treated frame above this: denoise
+    auto_noise_sigma: float = 4.0    # noise σ (grey levels) of the treated frame above this: denoise
+    auto_dark_min_sigma: float = 4.0  # under-exposed frames (agri) are always denoised, with σ at least this
     # noise-aware denoising (ours, canopy.enhance.noise): Immerkær/MAD noise σ, self-guided filter
     denoise_radius: int = 2          # px at full resolution (window 5×5)
     denoise_eps_factor: float = 2.0  # ε = (factor·σ)²: windows with std below ~2σ count as flat
@@ -74,7 +75,7 @@ class EnhanceParams:
         for name in ("omega", "t0", "tau", "wd_exponent", "low_contrast_lambda", "usm_alpha",
                      "usm_beta", "usm_sigma", "clahe_clip", "auto_dark_mean", "auto_bright_mean",
                      "auto_low_std", "auto_haze_dark", "fast_omega", "denoise_eps_factor",
-                     "auto_dehaze_max_clip", "auto_noise_sigma"):
+                     "auto_dehaze_max_clip", "auto_noise_sigma", "auto_dark_min_sigma"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
                 bad(name, "must be a finite number")
@@ -117,8 +118,9 @@ class EnhanceParams:
             bad("auto_dark_mean", f"must not exceed auto_bright_mean ({self.auto_bright_mean})")
         if not 0.0 <= self.auto_dehaze_max_clip <= 1.0:
             bad("auto_dehaze_max_clip", "must be in [0, 1]")
-        if not self.auto_noise_sigma >= 0.0:
-            bad("auto_noise_sigma", "must be >= 0")
+        for name in ("auto_noise_sigma", "auto_dark_min_sigma"):
+            if not getattr(self, name) >= 0.0:
+                bad(name, "must be >= 0")
         if not self.auto_low_std >= 0.0:
             bad("auto_low_std", "must be >= 0")
         if self.denoise_radius < 1:
