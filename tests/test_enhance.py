@@ -399,8 +399,9 @@ def test_auto_decisions_on_real_images():
     params = EnhanceParams(method="auto")
     assert auto_decide(_read(EUROC, cv2.IMREAD_GRAYSCALE), params)[0] == "none"
     assert auto_decide(_read(KITTI, cv2.IMREAD_GRAYSCALE), params)[0] == "none"
-    assert auto_decide(_read(LOL_LOW), params)[0] == "agri"
-    assert auto_decide(_grey(_read(LOL_LOW)), params)[0] == "agri"
+    assert auto_decide(_read(LOL_LOW), params)[0] == "afe"      # the dark branch (auto_dark_method)
+    assert auto_decide(_grey(_read(LOL_LOW)), params)[0] == "afe"
+    assert auto_decide(_read(LOL_LOW), EnhanceParams(auto_dark_method="agri"))[0] == "agri"
     for name in HAZE_IDS:
         hazy, clear = _haze_pair(name)
         assert auto_decide(hazy, params)[0] == "dehaze"
@@ -426,7 +427,7 @@ def test_make_enhancer_info(method):
     assert out.shape == img.shape and out.dtype == np.uint8
     assert set(info) == {"method", "requested", "mean_in", "std_in", "mean_out", "std_out", "noise_sigma", "ms"}
     assert info["requested"] == method and info["ms"] >= 0.0
-    assert info["method"] == ("agri>dn" if method == "auto" else method)  # LOL: dark and noisy
+    assert info["method"] == ("afe>dn" if method == "auto" else method)  # LOL: dark and noisy
     assert (info["noise_sigma"] > 0) == (method == "auto")
     assert info["method"] in AUTO_DECISIONS + ENHANCE_METHODS
     assert info["mean_in"] == pytest.approx(float(_grey(img).mean()), abs=0.01)
@@ -491,7 +492,7 @@ def test_params_defaults_are_the_papers():
     ("clahe_clip", 0.0), ("clahe_tiles", 0), ("auto_downsample", 0), ("auto_dark_mean", 300.0),
     ("auto_dark_mean", 250.0), ("fast_omega", float("inf")), ("min_keypoints", -1),
     ("block", 9.0), ("adaptive_fast", 1), ("denoise_radius", 0), ("denoise_eps_factor", 0.0),
-    ("auto_noise_sigma", -1.0), ("auto_dark_min_sigma", float("nan")), ("auto_dehaze_max_clip", 1.5),
+    ("auto_noise_sigma", -1.0), ("auto_dark_method", "clahe"), ("auto_dark_min_sigma", float("nan")), ("auto_dehaze_max_clip", 1.5),
 ])
 def test_params_validation(field, value):
     with pytest.raises(ConfigError) as info:
@@ -592,13 +593,13 @@ def test_auto_denoises_a_dark_noisy_real_pair_into_more_correct_stereo_matches()
     enhance = make_enhancer(params)
     al, info = enhance(dl)
     ar, info_r = enhance(dr, method=info["method"], noise_sigma=info["noise_sigma"])
-    assert info["method"] == info_r["method"] == "agri>dn"
+    assert info["method"] == info_r["method"] == "afe>dn"
     assert info_r["noise_sigma"] == info["noise_sigma"] > 0
     auto_correct = _stereo_correct(al, ar, ref, True)
-    agri_correct = _stereo_correct(dehaze_inverted(dl), dehaze_inverted(dr), ref, True)
+    afe_correct = _stereo_correct(agcwd_unsharp(dl), agcwd_unsharp(dr), ref, True)  # AFE alone
     none_correct = _stereo_correct(dl, dr, ref, False)
     assert none_correct < 20                      # raw: FAST finds (almost) nothing
-    assert auto_correct >= 1.5 * max(agri_correct, 1), (auto_correct, agri_correct)
+    assert auto_correct >= 1.5 * max(afe_correct, 1), (auto_correct, afe_correct)
 
 
 def test_auto_leaves_clean_real_frames_alone():

@@ -26,6 +26,7 @@ from shared.errors import ConfigError
 
 ENHANCE_METHODS = ("none", "he", "clahe", "afe", "agri", "auto")
 # What ``auto`` may decide per frame ("dehaze" = dark channel prior on the image itself).
+AUTO_DARK_METHODS = ("afe", "agri")
 # "X>dn": X, then the noise-aware denoiser (canopy.enhance.noise).
 AUTO_DECISIONS = ("none", "agri", "dehaze", "afe", "none>dn", "agri>dn", "dehaze>dn", "afe>dn")
 
@@ -50,7 +51,8 @@ class EnhanceParams:
     clahe_tiles: int = 8
     # auto (ours): statistics on a copy downsampled by ``auto_downsample``
     auto_downsample: int = 4
-    auto_dark_mean: float = 60.0     # mean grey below this: under-exposed -> agri
+    auto_dark_mean: float = 60.0     # mean grey below this: under-exposed -> auto_dark_method
+    auto_dark_method: str = "afe"    # agri | afe: what under-exposed frames get (see canopy.enhance.auto)
     auto_bright_mean: float = 200.0  # mean grey above this: over-exposed -> afe
     auto_low_std: float = 28.0       # std (downsampled copy) below this: low contrast
     auto_haze_dark: float = 100.0    # mean dark channel at/above this (with low std): hazy -> dehaze
@@ -84,6 +86,8 @@ class EnhanceParams:
                 bad(name, "must be an integer")
         if not isinstance(self.adaptive_fast, bool):
             bad("adaptive_fast", "must be true or false")
+        if self.auto_dark_method not in AUTO_DARK_METHODS:
+            bad("auto_dark_method", f"must be one of {', '.join(AUTO_DARK_METHODS)}")
         if self.method not in ENHANCE_METHODS:
             bad("method", f"must be one of {', '.join(ENHANCE_METHODS)}")
         if not 0.0 < self.omega <= 1.0:
