@@ -85,6 +85,7 @@ def run_canopy(dataset: str, path: Path, method: str, max_frames, workdir: Path)
     t = metrics.get("tracking") or {}
     enh = (res.summary.get("stats") or {}).get("enhancement") or {}
     return {"ok": res.outcome.ok, "tracked_pct": t.get("tracking_success_percent"),
+            "frames_total": t.get("frames_total"), "frames_processed": t.get("frames_processed"),
             "ate_rmse_m": ((metrics.get("ate") or {}).get("rmse")),
             "decisions": (enh.get("extra") or {}).get("methods", {}), "wall_s": time.perf_counter() - start}
 
@@ -207,7 +208,8 @@ def main(argv=None) -> int:
                               "noise": None if cell is None else label.rsplit("-", 1)[1]})
                     rows.append(r)
                     print(f"  [{time.time() - start:5.0f} s] {d:<9} {label:<16} {m:<5} tracked "
-                          f"{r['tracked_pct']}  ATE {r['ate_rmse_m']}  {r['decisions']}", flush=True)
+                          f"{r['tracked_pct']} of {r['frames_total']} (processed {r['frames_processed']})  "
+                          f"ATE {r['ate_rmse_m']}  {r['decisions']}", flush=True)
                 if orb is not None:
                     for tag, pre in (("orbslam3-raw", None), ("orbslam3-auto", pair_preprocess())):
                         try:

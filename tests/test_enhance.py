@@ -492,7 +492,7 @@ def test_params_defaults_are_the_papers():
     ("clahe_clip", 0.0), ("clahe_tiles", 0), ("auto_downsample", 0), ("auto_dark_mean", 300.0),
     ("auto_dark_mean", 250.0), ("fast_omega", float("inf")), ("min_keypoints", -1),
     ("block", 9.0), ("adaptive_fast", 1), ("denoise_radius", 0), ("denoise_eps_factor", 0.0),
-    ("auto_noise_sigma", -1.0), ("auto_dark_method", "clahe"), ("auto_dark_min_sigma", float("nan")), ("auto_dehaze_max_clip", 1.5),
+    ("auto_noise_sigma", -1.0), ("auto_dark_method", "clahe"), ("auto_denoise_lit", 1), ("auto_dark_min_sigma", float("nan")), ("auto_dehaze_max_clip", 1.5),
 ])
 def test_params_validation(field, value):
     with pytest.raises(ConfigError) as info:
@@ -610,9 +610,11 @@ def test_auto_leaves_clean_real_frames_alone():
         assert decision == "none" and sigma == 0.0 and out is img
 
 
-def test_auto_denoises_well_lit_noisy_frames():
+def test_auto_denoises_well_lit_noisy_frames_only_when_asked():
     img = _with_noise(_read(KITTI, cv2.IMREAD_GRAYSCALE), 8.0)
     out, decision, sigma = auto_full(img, EnhanceParams())
+    assert decision == "none" and out is img and sigma == 0.0
+    out, decision, sigma = auto_full(img, EnhanceParams(auto_denoise_lit=True))
     assert decision == "none>dn" and sigma > EnhanceParams().auto_noise_sigma
     assert estimate_noise(out) < 0.6 * estimate_noise(img)
 

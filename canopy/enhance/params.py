@@ -57,7 +57,8 @@ class EnhanceParams:
     auto_low_std: float = 28.0       # std (downsampled copy) below this: low contrast
     auto_haze_dark: float = 100.0    # mean dark channel at/above this (with low std): hazy -> dehaze
     auto_dehaze_max_clip: float = 0.02  # dehazing may clip at most this much more of the frame, else afe
-    auto_noise_sigma: float = 4.0    # noise σ (grey levels) of the treated frame above this: denoise
+    auto_denoise_lit: bool = False   # also denoise well-lit frames (see canopy.enhance.auto, rule 3)
+    auto_noise_sigma: float = 4.0    # with auto_denoise_lit: noise σ (grey levels) above this -> denoise
     auto_dark_min_sigma: float = 4.0  # under-exposed frames (agri) are always denoised, with σ at least this
     # noise-aware denoising (ours, canopy.enhance.noise): Immerkær/MAD noise σ, self-guided filter
     denoise_radius: int = 2          # px at full resolution (window 5×5)
@@ -84,8 +85,9 @@ class EnhanceParams:
         for name in ("block", "n_dark_pixels", "clahe_tiles", "auto_downsample", "min_keypoints", "denoise_radius"):
             if isinstance(getattr(self, name), bool) or not isinstance(getattr(self, name), int):
                 bad(name, "must be an integer")
-        if not isinstance(self.adaptive_fast, bool):
-            bad("adaptive_fast", "must be true or false")
+        for name in ("adaptive_fast", "auto_denoise_lit"):
+            if not isinstance(getattr(self, name), bool):
+                bad(name, "must be true or false")
         if self.auto_dark_method not in AUTO_DARK_METHODS:
             bad("auto_dark_method", f"must be one of {', '.join(AUTO_DARK_METHODS)}")
         if self.method not in ENHANCE_METHODS:
