@@ -248,3 +248,20 @@ def test_haze_plus_noise_needs_depth_and_applies_both():
     t = np.exp(-0.06 * 20.0)
     assert out.mean() == pytest.approx(40 * t + 220 * (1 - t), abs=0.5)
     assert out.std() > 1.0
+
+
+def test_tool_writes_a_grid_cell_with_a_named_noise_sensor(tmp_path):
+    from tools.degrade_sequence import main
+
+    out = tmp_path / "cell"
+    assert main(["--dataset", "kitti", "--out", str(out), "--mode", "haze+noise", "--beta", "0.03",
+                 "--noise", "high", "--max-frames", "2"]) == 0
+    clean = open_source("kitti", max_frames=2)
+    degraded = open_source("kitti", out)
+    assert len(degraded) == 2
+    a, b = clean.frame(1).left.astype(float), degraded.frame(1).left.astype(float)
+    assert b.mean() > a.mean() + 5           # airlight added
+    assert np.abs(b - a).std() > 3           # and the noisy sensor
+    import yaml
+    meta = yaml.safe_load((out / "DEGRADED.yaml").read_text())
+    assert (meta["params"]["full_well"], meta["params"]["read_noise"]) == (1000.0, 10.0)
