@@ -126,6 +126,7 @@ def heat_maps(rows: list[dict], datasets, gains, betas, noise, methods, out_dir:
                                  squeeze=False)
         for ax, (d, n, m) in zip(axes.ravel(), panels):
             grid = np.full((len(gains), len(betas)), np.nan)
+            lost = np.zeros(grid.shape, bool)
             clean = next((r for r in rows if r["dataset"] == d and r["cell"] == "clean" and r["method"] == m), None)
             for i, g in enumerate(gains):
                 for j, b in enumerate(betas):
@@ -136,14 +137,15 @@ def heat_maps(rows: list[dict], datasets, gains, betas, noise, methods, out_dir:
                         c = (clean or {}).get("ate_rmse_m")
                         v = v / c if c else None
                     if key == "ate_rmse_m" and r is not None and (r.get("tracked_pct") or 0) == 0:
-                        v = vmax  # nothing tracked: worst colour
+                        v, lost[i, j] = vmax, True  # nothing tracked: worst colour, labelled "lost"
                     grid[i, j] = np.nan if v is None else v
             ax.imshow(grid, cmap=cmap, vmin=0 if key == "tracked_pct" else 1.0, vmax=vmax, aspect="auto")
             for i in range(len(gains)):
                 for j in range(len(betas)):
                     if np.isfinite(grid[i, j]):
-                        ax.text(j, i, f"{grid[i, j]:.0f}" if key == "tracked_pct" else f"{grid[i, j]:.2f}",
-                                ha="center", va="center", fontsize=8)
+                        text = "lost" if lost[i, j] else (
+                            f"{grid[i, j]:.0f}" if key == "tracked_pct" else f"{grid[i, j]:.2f}")
+                        ax.text(j, i, text, ha="center", va="center", fontsize=8)
             ax.set_xticks(range(len(betas)), [f"{b:g}" for b in betas], fontsize=7)
             ax.set_yticks(range(len(gains)), [f"{g:g}" for g in gains], fontsize=7)
             ax.set_title(f"{d} · {n} noise · {m}", fontsize=8)
@@ -223,6 +225,9 @@ def main(argv=None) -> int:
                                   "beta": None if cell is None else (cell.beta if cell.haze else 0.0),
                                   "noise": None if cell is None else label.rsplit("-", 1)[1]})
                         rows.append(r)
+                        write_json(partial, {"benchmark": "bench_degrade_grid", "partial": True, "rows": rows})
+                        print(f"  [{time.time() - start:5.0f} s] {d:<9} {label:<16} {tag:<13} tracked "
+                              f"{r['tracked_pct']}  ATE {r['ate_rmse_m']}  {r.get('error', '')}", flush=True)
                 if cell is not None:
                     import shutil
                     shutil.rmtree(path, ignore_errors=True)  # degraded copies are big; keep the disk free
@@ -248,14 +253,17 @@ def main(argv=None) -> int:
                 checks.append({"dataset": d, "cell": label, "pass": bool(ok)})
                 line += "   pass" if ok else "   FAIL"
             print(line)
-    pngs = heat_maps(rows, datasets, gains, betas, noise, args.methods, Path(args.out_dir))
+    shown = list(args.methods) + (["orbslam3-raw", "orbslam3-auto"] if orb is not None else [])
     result = {"benchmark": "bench_degrade_grid", "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
               "quick": args.quick, "datasets": list(datasets), "gains": list(gains), "betas": list(betas),
               "noise_levels": {n: {"full_well": NOISE_LEVELS[n][0], "read_noise": NOISE_LEVELS[n][1]} for n in noise},
               "methods": list(args.methods), "orbslam3": {"available": orb is not None, "message": peer_msg},
-              "criteria": {"ate_factor": ATE_FACTOR, "checks": checks}, "heat_maps": [str(p) for p in pngs],
-              "rows": rows}
-    print(f"\nwrote {write_json(Path(args.out_dir) / 'bench_degrade_grid.json', result)}")
+              "criteria": {"ate_factor": ATE_FACTOR, "checks": checks}, "rows": rows}
+    out_json = Path(args.out_dir) / "bench_degrade_grid.json"
+    write_json(out_json, result)  # before the plots: a plotting failure must not lose the runs
+    pngs = heat_maps(rows, datasets, gains, betas, noise, shown, Path(args.out_dir)) if shown else []
+    result["heat_maps"] = [str(p) for p in pngs]
+    print(f"\nwrote {write_json(out_json, result)}")
     for p in pngs:
         print(f"wrote {p}")
     partial.unlink(missing_ok=True)
