@@ -2,8 +2,8 @@
 
 It owns its output ring, so tracking always reads images this actor wrote.
 Both images of a pair get the same treatment (``auto`` decides on the left
-image and applies that decision to the right one), otherwise stereo matching
-would compare differently processed images.
+image and applies that decision, with the left image's noise σ, to the right
+one), otherwise stereo matching would compare differently processed images.
 """
 from __future__ import annotations
 
@@ -61,7 +61,7 @@ class EnhancementActor(Actor):
         check_pair(left, right, lay.height, lay.width, index)
         t0 = time.perf_counter()
         left_e, info = self.enhancer(left)
-        right_e, _ = self.enhancer(right, method=info["method"])
+        right_e, _ = self.enhancer(right, method=info["method"], noise_sigma=info["noise_sigma"])
         enhance_ms = (time.perf_counter() - t0) * 1e3
         check_pair(left_e, right_e, lay.height, lay.width, index)
         slot, gen = self.out_ring.write(index, stamp, [left_e, right_e])

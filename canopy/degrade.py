@@ -43,6 +43,13 @@ Depth (``depth_from_stereo``)
     the scattering model needs and, unlike z, does not change when an image
     is rectified (a rotation about the camera centre).
 
+Noise (mode ``noise``)
+    The sensor model of ``darken`` at gain 1: shot and read noise on the
+    light as recorded. ``dark`` always includes the noise (there is no dark
+    exposure without it); ``NOISE_LEVELS`` names the two sensors of the
+    degradation grid and ``grid_cells`` lists its cells (light × haze ×
+    noise), each a ``DegradeParams``.
+
 Order for ``dark+haze``: haze first (it happens in the scene), then low light
 (it happens at the sensor): ``darken(add_haze(J, d, β, A), gain)``.
 
@@ -60,8 +67,16 @@ import numpy as np
 from shared.errors import ConfigError, InputError
 from shared.types import StereoCalibration
 
-DEGRADE_MODES = ("dark", "haze", "dark+haze")
+DEGRADE_MODES = ("dark", "haze", "dark+haze", "noise", "haze+noise")
 WHITE = 255.0
+# Sensor noise levels of the degradation grid (issue 9): effective full well (electrons at
+# 8-bit white) and read noise (electrons rms). "low" is DegradeParams' default sensor; "high" a
+# smaller pixel with a noisier read-out (4x less full well, 2.5x the read noise).
+NOISE_LEVELS = {"low": (4000.0, 4.0), "high": (1000.0, 10.0)}
+# The grid's axes: light reaching the sensor (1 = as recorded, with the sensor's noise),
+# haze extinction β (1/m, from depth) and the noise level.
+GRID_GAINS = (1.0, 0.15, 0.06, 0.02)
+GRID_BETAS = (0.0, 0.03, 0.06)
 
 
 @dataclass(frozen=True)
@@ -93,7 +108,20 @@ class DegradeParams:
 
     @property
     def dark(self) -> bool:
-        return "dark" in self.mode
+        """Whether the sensor model runs (low light, or noise alone at gain 1)."""
+        return "dark" in self.mode or "noise" in self.mode
+
+    @property
+    def effective_gain(self) -> float:
+        return self.gain if "dark" in self.mode else 1.0
+
+    @property
+    def label(self) -> str:
+        """Short cell name, e.g. ``g0.06-b0.03-high`` (gain, β, noise sensor)."""
+        noise = next((k for k, v in NOISE_LEVELS.items() if v == (self.full_well, self.read_noise)),
+                     f"fw{self.full_well:g}rn{self.read_noise:g}")
+        beta = self.beta if self.haze else 0.0
+        return f"g{self.effective_gain:g}-b{beta:g}-{noise}"
 
     @property
     def haze(self) -> bool:
@@ -317,5 +345,27 @@ def degrade_image(image: np.ndarray, params: DegradeParams, ray_m=None,
             raise ConfigError("mode", f"mode {params.mode!r} needs a depth map for the haze")
         out = add_haze(out, ray_m, params.beta, params.airlight, params.gamma)
     if params.dark:
-        out = darken(out, params.gain, params.full_well, params.read_noise, params.gamma, rng)
+        out = darken(out, params.effective_gain, params.full_well, params.read_noise, params.gamma, rng)
     return out
+
+
+def grid_cells(gains=GRID_GAINS, betas=GRID_BETAS, noise_levels=tuple(NOISE_LEVELS), seed: int = 0,
+               **common) -> list[DegradeParams]:
+    """The degradation grid: one ``DegradeParams`` per (gain, β, noise level).
+
+    Gain 1 with β 0 is the sensor noise alone (mode ``noise``); every cell has
+    shot and read noise of its noise level. ``common``: other DegradeParams
+    fields (airlight, max_depth, ...).
+    """
+    cells = []
+    for noise in noise_levels:
+        if noise not in NOISE_LEVELS:
+            raise ConfigError("noise_levels", f"unknown noise level {noise!r}; known: {', '.join(NOISE_LEVELS)}")
+        full_well, read_noise = NOISE_LEVELS[noise]
+        for gain in gains:
+            for beta in betas:
+                dark = "dark" if gain != 1.0 else "noise"
+                mode = dark if beta == 0 else ("dark+haze" if dark == "dark" else "haze+noise")
+                cells.append(DegradeParams(mode=mode, gain=float(gain), beta=float(beta), full_well=full_well,
+                                           read_noise=read_noise, seed=seed, **common))
+    return cells

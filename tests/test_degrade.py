@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from canopy.degrade import (DegradeParams, add_haze, darken, depth_from_stereo, fill_disparity_background,
-                            ray_length, transmission)
+from canopy.degrade import (DegradeParams, add_haze, darken, degrade_image, depth_from_stereo,
+                            fill_disparity_background, ray_length, transmission)
 from canopy.sources import open_source
 from shared.errors import ConfigError, InputError
 from shared.types import StereoCalibration
@@ -206,3 +206,62 @@ def test_tool_refuses_to_overwrite_its_input(tmp_path):
     (tmp_path / "busy" / "x").write_text("x")
     with pytest.raises(ConfigError, match="not empty"):
         degrade_sequence("kitti", tmp_path / "busy", DegradeParams(), max_frames=1)
+
+
+# ---------------------------------------------------------------- the degradation grid (issue 9)
+
+def test_grid_cells_cover_light_haze_and_noise():
+    from canopy.degrade import GRID_BETAS, GRID_GAINS, NOISE_LEVELS, grid_cells
+
+    cells = grid_cells()
+    assert len(cells) == len(GRID_GAINS) * len(GRID_BETAS) * len(NOISE_LEVELS)
+    labels = [c.label for c in cells]
+    assert len(set(labels)) == len(labels)
+    assert "g1-b0-low" in labels and "g0.02-b0.06-high" in labels
+    by_label = dict(zip(labels, cells))
+    assert by_label["g1-b0-high"].mode == "noise" and by_label["g1-b0.03-low"].mode == "haze+noise"
+    assert by_label["g0.06-b0.06-high"].mode == "dark+haze"
+    assert (by_label["g0.15-b0-high"].full_well, by_label["g0.15-b0-high"].read_noise) == NOISE_LEVELS["high"]
+    with pytest.raises(ConfigError, match="noise"):
+        grid_cells(noise_levels=("medium",))
+
+
+def test_noise_mode_keeps_the_light_and_adds_sensor_noise():
+    from canopy.degrade import NOISE_LEVELS
+
+    image = np.full((200, 200), 128, np.uint8)
+    full_well, read_noise = NOISE_LEVELS["high"]
+    out = degrade_image(image, DegradeParams(mode="noise", gain=0.1, full_well=full_well, read_noise=read_noise),
+                        rng=0)
+    # gain is ignored without "dark": mean stays, variance is shot + read noise in grey levels
+    expected_var = (255.0 / full_well) ** 2 * (128.0 * full_well / 255.0 + read_noise ** 2) + 1 / 12
+    assert out.mean() == pytest.approx(128.0, abs=0.3)
+    assert out.var() == pytest.approx(expected_var, rel=0.05)
+
+
+def test_haze_plus_noise_needs_depth_and_applies_both():
+    image = np.full((60, 80), 40, np.uint8)
+    params = DegradeParams(mode="haze+noise", beta=0.06, airlight=220.0)
+    with pytest.raises(ConfigError, match="depth"):
+        degrade_image(image, params)
+    out = degrade_image(image, params, ray_m=np.full((60, 80), 20.0), rng=0)
+    t = np.exp(-0.06 * 20.0)
+    assert out.mean() == pytest.approx(40 * t + 220 * (1 - t), abs=0.5)
+    assert out.std() > 1.0
+
+
+def test_tool_writes_a_grid_cell_with_a_named_noise_sensor(tmp_path):
+    from tools.degrade_sequence import main
+
+    out = tmp_path / "cell"
+    assert main(["--dataset", "kitti", "--out", str(out), "--mode", "haze+noise", "--beta", "0.03",
+                 "--noise", "high", "--max-frames", "2"]) == 0
+    clean = open_source("kitti", max_frames=2)
+    degraded = open_source("kitti", out)
+    assert len(degraded) == 2
+    a, b = clean.frame(1).left.astype(float), degraded.frame(1).left.astype(float)
+    assert b.mean() > a.mean() + 5           # airlight added
+    assert np.abs(b - a).std() > 3           # and the noisy sensor
+    import yaml
+    meta = yaml.safe_load((out / "DEGRADED.yaml").read_text())
+    assert (meta["params"]["full_well"], meta["params"]["read_noise"]) == (1000.0, 10.0)

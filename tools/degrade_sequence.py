@@ -3,7 +3,13 @@
 
     python tools/degrade_sequence.py --dataset kitti --out /tmp/kitti_dark --mode dark --gain 0.15
     python tools/degrade_sequence.py --dataset euroc --out /tmp/euroc_haze --mode haze --beta 0.3 --max-depth 20
+    python tools/degrade_sequence.py --dataset kitti --out /tmp/kitti_grid --mode dark+haze --gain 0.06 --beta 0.06 --noise high
     python launch.py --dataset kitti --path /tmp/kitti_dark --enhance agri
+
+Modes: ``dark`` (less light, with shot + read noise), ``haze``, ``dark+haze``,
+``noise`` (the sensor noise at full light) and ``haze+noise``; ``--noise
+low|high`` picks one of the degradation grid's sensors (``NOISE_LEVELS``:
+full well and read noise) instead of ``--full-well`` / ``--read-noise``.
 
 The physics lives in ``canopy.degrade``; this tool does the files.
 
@@ -54,7 +60,8 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from canopy.degrade import DEGRADE_MODES, DegradeParams, degrade_image, depth_from_stereo, ray_length  # noqa: E402
+from canopy.degrade import (DEGRADE_MODES, NOISE_LEVELS, DegradeParams, degrade_image,  # noqa: E402
+                            depth_from_stereo, ray_length)
 from canopy.sources import BUNDLED_DATA, open_source  # noqa: E402
 from canopy.sources.base import IMAGE_SUFFIXES, load_yaml_file, numbers  # noqa: E402
 from canopy.sources.euroc import EurocSource  # noqa: E402
@@ -250,6 +257,9 @@ def main(argv=None) -> int:
     ap.add_argument("--gain", type=float, default=d.gain, help="light reaching the sensor (0.1 = 10x less)")
     ap.add_argument("--full-well", type=float, default=d.full_well, help="electrons at 8-bit white")
     ap.add_argument("--read-noise", type=float, default=d.read_noise, help="electrons rms")
+    ap.add_argument("--noise", choices=tuple(NOISE_LEVELS), default=None,
+                    help="a sensor of the degradation grid: " + ", ".join(
+                        f"{k} = {fw:g} e- full well, {rn:g} e- read noise" for k, (fw, rn) in NOISE_LEVELS.items()))
     ap.add_argument("--gamma", type=float, default=d.gamma, help="encoding gamma of the images (1 = linear)")
     ap.add_argument("--beta", type=float, default=d.beta, help="haze extinction coefficient, 1/m")
     ap.add_argument("--airlight", type=float, default=d.airlight, help="airlight A, grey levels")
@@ -260,6 +270,8 @@ def main(argv=None) -> int:
     ap.add_argument("--max-frames", type=int, default=None)
     ap.add_argument("--force", action="store_true", help="replace a non-empty output folder")
     args = ap.parse_args(argv)
+    if args.noise is not None:
+        args.full_well, args.read_noise = NOISE_LEVELS[args.noise]
     try:
         params = DegradeParams(mode=args.mode, gain=args.gain, full_well=args.full_well,
                                read_noise=args.read_noise, gamma=args.gamma, beta=args.beta,

@@ -26,7 +26,9 @@ from shared.errors import ConfigError
 
 ENHANCE_METHODS = ("none", "he", "clahe", "afe", "agri", "auto")
 # What ``auto`` may decide per frame ("dehaze" = dark channel prior on the image itself).
-AUTO_DECISIONS = ("none", "agri", "dehaze", "afe")
+AUTO_DARK_METHODS = ("afe", "agri")
+# "X>dn": X, then the noise-aware denoiser (canopy.enhance.noise).
+AUTO_DECISIONS = ("none", "agri", "dehaze", "afe", "none>dn", "agri>dn", "dehaze>dn", "afe>dn")
 
 
 @dataclass(frozen=True)
@@ -49,10 +51,18 @@ class EnhanceParams:
     clahe_tiles: int = 8
     # auto (ours): statistics on a copy downsampled by ``auto_downsample``
     auto_downsample: int = 4
-    auto_dark_mean: float = 60.0     # mean grey below this: under-exposed -> agri
+    auto_dark_mean: float = 60.0     # mean grey below this: under-exposed -> auto_dark_method
+    auto_dark_method: str = "afe"    # agri | afe: what under-exposed frames get (see canopy.enhance.auto)
     auto_bright_mean: float = 200.0  # mean grey above this: over-exposed -> afe
     auto_low_std: float = 28.0       # std (downsampled copy) below this: low contrast
     auto_haze_dark: float = 100.0    # mean dark channel at/above this (with low std): hazy -> dehaze
+    auto_dehaze_max_clip: float = 0.02  # dehazing may clip at most this much more of the frame, else afe
+    auto_denoise_lit: bool = False   # also denoise well-lit frames (see canopy.enhance.auto, rule 3)
+    auto_noise_sigma: float = 4.0    # with auto_denoise_lit: noise σ (grey levels) above this -> denoise
+    auto_dark_min_sigma: float = 4.0  # under-exposed frames (agri) are always denoised, with σ at least this
+    # noise-aware denoising (ours, canopy.enhance.noise): Immerkær/MAD noise σ, self-guided filter
+    denoise_radius: int = 2          # px at full resolution (window 5×5)
+    denoise_eps_factor: float = 2.0  # ε = (factor·σ)²: windows with std below ~2σ count as flat
     # AFE §4.2, Eq. 18–19
     adaptive_fast: bool = True
     fast_omega: float = 128.0
@@ -67,15 +77,19 @@ class EnhanceParams:
 
         for name in ("omega", "t0", "tau", "wd_exponent", "low_contrast_lambda", "usm_alpha",
                      "usm_beta", "usm_sigma", "clahe_clip", "auto_dark_mean", "auto_bright_mean",
-                     "auto_low_std", "auto_haze_dark", "fast_omega"):
+                     "auto_low_std", "auto_haze_dark", "fast_omega", "denoise_eps_factor",
+                     "auto_dehaze_max_clip", "auto_noise_sigma", "auto_dark_min_sigma"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
                 bad(name, "must be a finite number")
-        for name in ("block", "n_dark_pixels", "clahe_tiles", "auto_downsample", "min_keypoints"):
+        for name in ("block", "n_dark_pixels", "clahe_tiles", "auto_downsample", "min_keypoints", "denoise_radius"):
             if isinstance(getattr(self, name), bool) or not isinstance(getattr(self, name), int):
                 bad(name, "must be an integer")
-        if not isinstance(self.adaptive_fast, bool):
-            bad("adaptive_fast", "must be true or false")
+        for name in ("adaptive_fast", "auto_denoise_lit"):
+            if not isinstance(getattr(self, name), bool):
+                bad(name, "must be true or false")
+        if self.auto_dark_method not in AUTO_DARK_METHODS:
+            bad("auto_dark_method", f"must be one of {', '.join(AUTO_DARK_METHODS)}")
         if self.method not in ENHANCE_METHODS:
             bad("method", f"must be one of {', '.join(ENHANCE_METHODS)}")
         if not 0.0 < self.omega <= 1.0:
@@ -108,8 +122,17 @@ class EnhanceParams:
                 bad(name, "must be in [0, 255]")
         if not self.auto_dark_mean <= self.auto_bright_mean:
             bad("auto_dark_mean", f"must not exceed auto_bright_mean ({self.auto_bright_mean})")
+        if not 0.0 <= self.auto_dehaze_max_clip <= 1.0:
+            bad("auto_dehaze_max_clip", "must be in [0, 1]")
+        for name in ("auto_noise_sigma", "auto_dark_min_sigma"):
+            if not getattr(self, name) >= 0.0:
+                bad(name, "must be >= 0")
         if not self.auto_low_std >= 0.0:
             bad("auto_low_std", "must be >= 0")
+        if self.denoise_radius < 1:
+            bad("denoise_radius", "must be >= 1")
+        if not self.denoise_eps_factor > 0.0:
+            bad("denoise_eps_factor", "must be > 0")
         if not self.fast_omega > 0.0:
             bad("fast_omega", "must be > 0")
         if self.min_keypoints < 0:
