@@ -1,0 +1,6 @@
+"""Monocular mode (issue 13): ORB-SLAM-style two-view initialisation, monocular tracking
+and local mapping with GTSAM projection factors. Stereo stays the default sensor."""
+from canopy.mono.params import MonoParams
+from canopy.mono.two_view import TwoViewResult, initialise_two_view
+
+__all__ = ["MonoParams", "TwoViewResult", "initialise_two_view"]
