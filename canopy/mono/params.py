@@ -60,7 +60,7 @@ class MonoParams:
     covisible_for_triangulation: int = 10  # neighbour keyframes new points are triangulated with
     min_baseline_depth_ratio: float = 0.01  # skip pairs whose baseline / median depth is below
     triangulation_max_hamming: int = 50
-    triangulation_ratio: float = 0.6      # ORB-SLAM SearchForTriangulation nnratio
+    triangulation_ratio: float = 0.9      # best < ratio x second best along the epipolar band
     epipolar_chi2: float = CHI2_95_1DOF   # px^2 (x sigma^2) distance to the epipolar line
     ba_iterations: int = 10
     ba_passes: int = 2
