@@ -41,6 +41,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lines", action=argparse.BooleanOptionalAction, default=None,
                    help="track and bundle-adjust line segments (FLD + LBD) as well as ORB points "
                         "(default from the config: off)")
+    p.add_argument("--sensor", choices=("stereo", "mono"), default=None,
+                   help="stereo pairs, or the left image only (monocular: two-view initialisation, "
+                        "a map without metric scale, Sim(3)-aligned ATE in metrics.json); default from "
+                        "the config: stereo")
     p.add_argument("--inspect", default=None, metavar="ENDPOINT",
                    help="publish every event on this ZeroMQ endpoint for remote clients, "
                         "e.g. tcp://0.0.0.0:5560 (see tools/watch_run.py)")
@@ -64,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
         result = run_slam(args.dataset, path=args.path, config=args.config, out=args.out, clock=args.clock,
                           max_frames=args.max_frames, enhance=args.enhance, inspect=args.inspect,
                           progress=not args.quiet, preset=args.preset, seed=args.seed, lines=args.lines,
-                          record=args.record)
+                          record=args.record, sensor=args.sensor)
     except CanopyError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

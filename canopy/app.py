@@ -84,10 +84,12 @@ def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_fra
              {"in_ring": rings["raw"], "out_ring": rings["enhanced"], "params": cfg.enhancement}, ["tracking"]),
         spec("tracking", "actors.tracking:TrackingActor",
              {"ring": rings["enhanced"], "calib": calib, "params": cfg.tracking,
-              "enhancement": cfg.enhancement, "lockstep_wait_s": rt.lockstep_wait_s},
+              "enhancement": cfg.enhancement, "lockstep_wait_s": rt.lockstep_wait_s,
+              "sensor": rt.sensor, "mono": cfg.mono},
              ["local_mapping", "source", *to_recorder]),
         spec("local_mapping", "actors.local_mapping:LocalMappingActor",
-             {"calib": calib, "params": cfg.mapping, "snapshot_period_s": rt.map_snapshot_period_s},
+             {"calib": calib, "params": cfg.mapping, "snapshot_period_s": rt.map_snapshot_period_s,
+              "sensor": rt.sensor, "mono": cfg.mono, "pixel_sigma": cfg.tracking.pixel_sigma},
              ["tracking", *to_recorder]),
     ] + ([spec("recorder", "actors.recorder:RecorderActor",
                {"path": record, "ring": rings["enhanced"], "image_every": 1, "end_of_streams": 2}, [])]
@@ -97,11 +99,13 @@ def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_fra
 def run_slam(dataset: str, path: str | None = None, config: str | None = None, out: str | None = None,
              clock: str | None = None, max_frames: int | None = None, enhance: str | None = None,
              inspect: str | None = None, progress: bool = True, preset: str | None = None,
-             seed: int = 0, lines: bool | None = None, record: str | None = None) -> RunResult:
+             seed: int = 0, lines: bool | None = None, record: str | None = None,
+             sensor: str | None = None) -> RunResult:
     if dataset not in DATASETS:
         from shared.errors import ConfigError
         raise ConfigError("--dataset", f"unknown dataset {dataset!r}; choose one of {DATASETS}")
-    cfg = with_overrides(load_run_config(dataset, config), clock=clock, enhance=enhance, lines=lines)
+    cfg = with_overrides(load_run_config(dataset, config), clock=clock, enhance=enhance, lines=lines,
+                         sensor=sensor)
     if dataset == "synthetic":
         # A generated sequence is written in the EuRoC ASL layout and read as such.
         if path is None:
@@ -134,7 +138,7 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
                 "path": str(source.root) if hasattr(source, "root") else path,
                 "source": source.name, "clock": cfg.runtime.clock,
                 "enhancement": getattr(cfg.enhancement, "method", "none"), "config_file": cfg.source_file,
-                "lines": bool(cfg.tracking.use_lines), "recording": record_path,
+                "lines": bool(cfg.tracking.use_lines), "recording": record_path, "sensor": cfg.runtime.sensor,
                 "outcome": outcome.reason, "ok": outcome.ok, "wall_s": outcome.wall_s,
                 "frames_per_s": len(collector.poses) / outcome.wall_s if outcome.wall_s else None,
                 "cpu_count": os.cpu_count(), "calibration": calib.to_dict(),
@@ -151,4 +155,6 @@ def _write_config(out_dir: Path, cfg) -> None:
     import yaml
     doc = {"runtime": asdict(cfg.runtime), "enhancement": asdict(cfg.enhancement),
            "tracking": asdict(cfg.tracking), "mapping": asdict(cfg.mapping)}
+    if cfg.mono is not None and cfg.runtime.sensor == "mono":
+        doc["mono"] = asdict(cfg.mono)
     (out_dir / "config_used.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))

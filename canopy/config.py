@@ -16,6 +16,7 @@ from shared.params import load_yaml, params_from_mapping
 REPO_ROOT = Path(__file__).resolve().parents[1]
 CONFIG_DIR = REPO_ROOT / "configs"
 CLOCK_MODES = ("lockstep", "realtime")
+SENSORS = ("stereo", "mono")
 
 
 @dataclass(frozen=True)
@@ -30,8 +31,11 @@ class RuntimeParams:
     lockstep_wait_s: float = 60.0    # longest wait for a map update in lockstep
     map_snapshot_period_s: float = 0.5
     seed: int = 0
+    sensor: str = "stereo"           # stereo | mono (the left image only; canopy.mono)
 
     def validate(self) -> None:
+        if self.sensor not in SENSORS:
+            raise ConfigError("runtime.sensor", f"must be one of {SENSORS}, got {self.sensor!r}")
         if self.clock not in CLOCK_MODES:
             raise ConfigError("runtime.clock", f"must be one of {CLOCK_MODES}, got {self.clock!r}")
         if self.ring_slots < 2:
@@ -49,6 +53,7 @@ class RunConfig:
     tracking: object
     mapping: object
     source_file: str
+    mono: object = None              # canopy.mono.MonoParams (section ``mono``, used with sensor: mono)
 
 
 def default_config_path(dataset: str) -> Path:
@@ -59,10 +64,11 @@ def load_run_config(dataset: str, config_path: str | Path | None = None) -> RunC
     from canopy.backend import MappingParams
     from canopy.enhance import EnhanceParams
     from canopy.frontend import TrackingParams
+    from canopy.mono.params import MonoParams
 
     path = Path(config_path) if config_path else default_config_path(dataset)
     raw = load_yaml(path)
-    known = {"runtime", "enhancement", "tracking", "mapping"}
+    known = {"runtime", "enhancement", "tracking", "mapping", "mono"}
     unknown = sorted(set(raw) - known)
     if unknown:
         raise ConfigError(path, f"unknown section(s) {unknown}; expected {sorted(known)}")
@@ -73,12 +79,15 @@ def load_run_config(dataset: str, config_path: str | Path | None = None) -> RunC
         tracking=params_from_mapping(TrackingParams, raw.get("tracking"), src),
         mapping=params_from_mapping(MappingParams, raw.get("mapping"), src),
         source_file=src,
+        mono=params_from_mapping(MonoParams, raw.get("mono"), src),
     )
 
 
 def with_overrides(cfg: RunConfig, clock: str | None = None, enhance: str | None = None,
-                   lines: bool | None = None) -> RunConfig:
+                   lines: bool | None = None, sensor: str | None = None) -> RunConfig:
     runtime = cfg.runtime if clock is None else replace(cfg.runtime, clock=clock)
+    if sensor is not None:
+        runtime = replace(runtime, sensor=sensor)
     if lines is not None:  # points + lines needs both tracking and local BA to agree
         cfg = replace(cfg, tracking=replace(cfg.tracking, use_lines=lines),
                       mapping=replace(cfg.mapping, use_lines=lines))
