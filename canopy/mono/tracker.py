@@ -20,6 +20,7 @@ States: not initialised -> ok <-> lost (-> not initialised again after
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -40,6 +41,14 @@ _EMPTY_DESC = np.zeros((0, 32), np.uint8)
 
 def _ms(t0: float) -> float:
     return (time.perf_counter() - t0) * 1e3
+
+
+@dataclass
+class MonoTrackingResult(TrackingResult):
+    """A ``TrackingResult`` with every keyframe the frame produced, in order: two at the
+    initialisation (reference and current), else none or one (``keyframe``)."""
+
+    keyframes: list[KeyframeData] = field(default_factory=list)
 
 
 def window_knn(q_uv, q_desc, r_uv, r_desc, radius: float, max_hamming: int, ratio: float):
@@ -135,7 +144,7 @@ class MonoTracker:
 
     # ------------------------------------------------------------------ entry point
     def track(self, frame: StereoFrame, fast_threshold: int | None = None, fast_fallback: int | None = None,
-              fast_min_keypoints: int = 0) -> TrackingResult:
+              fast_min_keypoints: int = 0) -> MonoTrackingResult:
         t_all = time.perf_counter()
         timings: dict[str, float] = {}
         t0 = time.perf_counter()
@@ -151,10 +160,8 @@ class MonoTracker:
 
     # ------------------------------------------------------------------ initialisation
     def _not_initialised(self, frame: StereoFrame, n_matches: int = 0) -> TrackingResult:
-        res = TrackingResult(frame.index, frame.timestamp, self._T_last.copy(), STATUS_INIT, 0, n_matches,
-                             False, None, -1)
-        res.keyframes = []
-        return res
+        return MonoTrackingResult(frame.index, frame.timestamp, self._T_last.copy(), STATUS_INIT, 0, n_matches,
+                                  False, None, -1)
 
     def _try_initialise(self, frame: StereoFrame, feats: Features, timings: dict) -> TrackingResult:
         m = self.mono
@@ -213,10 +220,8 @@ class MonoTracker:
         self._T_last = T_w_cur.copy()
         self._set_reference(frame.index, T_w_cur)
         self._lost_run = 0
-        res = TrackingResult(frame.index, frame.timestamp, T_w_cur, STATUS_OK, n, n, True, kf_cur, frame.index,
-                             T_ref_cam=np.eye(4), keyframe_reason="initialisation")
-        res.keyframes = [kf_ref, kf_cur]
-        return res
+        return MonoTrackingResult(frame.index, frame.timestamp, T_w_cur, STATUS_OK, n, n, True, kf_cur, frame.index,
+                                  T_ref_cam=np.eye(4), keyframe_reason="initialisation", keyframes=[kf_ref, kf_cur])
 
     def _keyframe(self, frame, feats: Features, T_wc, matched_ids, restart=False, depth=None,
                   new_ids=None) -> KeyframeData:
@@ -320,10 +325,8 @@ class MonoTracker:
         self._seen = []
         if self._lost_run >= self.mono.lost_frames_to_reset:
             self._reset()
-        res = TrackingResult(frame.index, frame.timestamp, self._T_last.copy(), STATUS_LOST, n_inl, n_matches,
-                             False, None, self._ref_kf)
-        res.keyframes = []
-        return res
+        return MonoTrackingResult(frame.index, frame.timestamp, self._T_last.copy(), STATUS_LOST, n_inl, n_matches,
+                                  False, None, self._ref_kf)
 
     def _track_frame(self, frame: StereoFrame, feats: Features, timings: dict) -> TrackingResult:
         m = self.mono
@@ -383,7 +386,6 @@ class MonoTracker:
             self._set_reference(frame.index, T_wc)
         self._velocity = se3_inv(self._T_last) @ T_wc
         self._T_last = T_wc.copy()
-        res = TrackingResult(frame.index, frame.timestamp, T_wc, STATUS_OK, n_inl, len(r), is_kf, kf, ref,
-                             T_ref_cam=T_ref_cam, keyframe_reason="+".join(reasons) if is_kf else "")
-        res.keyframes = [kf] if kf is not None else []
-        return res
+        return MonoTrackingResult(frame.index, frame.timestamp, T_wc, STATUS_OK, n_inl, len(r), is_kf, kf, ref,
+                                  T_ref_cam=T_ref_cam, keyframe_reason="+".join(reasons) if is_kf else "",
+                                  keyframes=[kf] if kf is not None else [])
