@@ -132,3 +132,28 @@ def test_points_seen_by_two_keyframes_only_are_culled_later():
     # the initial two-view map is not "recent" (ORB-SLAM): it stays
     n_init_two_views = len(set(range(250)) & {lid for lid, lm in mapper.landmarks.items() if len(lm.obs) >= 2})
     assert n_init_two_views >= 200 and sum(lid < 250 for lid in mapper.landmarks) == n_init_two_views
+
+
+def test_fusion_gives_a_missed_point_its_new_view_and_merges_duplicates():
+    X, desc, poses = _scene(seed=3)
+    mapper = MonoMapper(CALIB, MonoParams())
+    _, init_ids = _initial_map(mapper, X, desc, poses)
+    # KF2 as tracking would hand it over, but tracking missed point 0 and point 1 was made
+    # twice (a duplicate landmark seen by KF1 only, sharing KF1's keypoint with the original)
+    ids = init_ids.copy()
+    ids[0] = -1
+    kf2, vis2 = _keyframe(2, poses[2], X, desc, ids)
+    i0 = int(np.flatnonzero(vis2 == 0)[0])
+    assert kf2.landmark_ids[i0] == -1
+    original = mapper.landmarks[1]
+    dup_id = 10**6
+    from canopy.mono.mapper import MonoLandmark
+    mapper.landmarks[dup_id] = MonoLandmark(dup_id, original.position + 1e-4, original.descriptor.copy(),
+                                            {}, segment=original.segment, recent=False)
+    kf2.landmark_ids[np.flatnonzero(vis2 == 1)[0]] = dup_id
+    mapper.insert_keyframe(kf2)
+    assert 0 in mapper.landmarks and 2 in mapper.landmarks[0].obs          # the missed view was found
+    assert mapper.keyframes[2].landmark[i0] == 0
+    assert mapper.n_fused >= 1 and (dup_id in mapper.landmarks) != (1 in mapper.landmarks)
+    survivor = mapper.landmarks.get(1) or mapper.landmarks[dup_id]
+    assert {0, 1, 2} <= set(survivor.obs)                                  # one landmark, all three views

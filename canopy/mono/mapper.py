@@ -18,7 +18,7 @@ import gtsam
 import numpy as np
 
 from canopy.frontend.geometry import se3_inv
-from canopy.frontend.matching import unique_by_reference
+from canopy.frontend.matching import as_words, match_in_window, unique_by_reference
 from canopy.frontend.messages import KeyframeData, LocalMapUpdate
 from canopy.mono.params import MonoParams
 from shared.types import StereoCalibration, Trajectory
@@ -92,6 +92,7 @@ class MonoMapper:
         self.timings: list[dict[str, float]] = []
         self.n_culled = 0
         self.n_triangulated = 0
+        self.n_fused = 0
 
     # ----------------------------------------------------------------- public API
     def insert_keyframe(self, kf: KeyframeData) -> LocalMapUpdate:
@@ -101,8 +102,17 @@ class MonoMapper:
         rec = self._insert(kf)
         timings["insert"] = _ms(t0)
         t0 = time.perf_counter()
+        neighbours = self._neighbours(rec, self.params.covisible_for_triangulation)
+        self._fuse_into(rec, self._landmarks_of(neighbours), kf.scale_factor)
+        timings["fuse_in"] = _ms(t0)
+        t0 = time.perf_counter()
         self._triangulate_new_points(rec, kf.scale_factor)
         timings["triangulate"] = _ms(t0)
+        t0 = time.perf_counter()
+        mine = self._landmarks_of([rec.index])
+        for k in neighbours:
+            self._fuse_into(self.keyframes[k], mine, kf.scale_factor)
+        timings["fuse_out"] = _ms(t0)
         t0 = time.perf_counter()
         local, fixed = self._local_window(rec)
         if len(local) >= 1 and len(local) + len(fixed) >= 2:
@@ -187,13 +197,73 @@ class MonoMapper:
         neigh.sort(key=lambda k: (-counts[k], -k))
         return neigh[:n]
 
+    # ----------------------------------------------------------------- fusion
+    def _landmarks_of(self, kf_indices) -> list[int]:
+        ids: set[int] = set()
+        for k in kf_indices:
+            lm = self.keyframes[k].landmark
+            ids.update(lm[lm >= 0].tolist())
+        return sorted(ids)
+
+    def _fuse_into(self, target: MonoKeyframe, lm_ids: list[int], scale: float) -> None:
+        """ORB-SLAM Fuse (SearchInNeighbors): project landmarks into ``target`` and search a
+        small window; a free keypoint gains the observation, a keypoint holding another
+        landmark means two landmarks are one point: the one with fewer views is merged into
+        the other. Longer tracks carry the map's scale further (less scale drift)."""
+        lm_ids = [l for l in lm_ids if l in self.landmarks and target.index not in self.landmarks[l].obs
+                  and self.landmarks[l].segment == target.segment]
+        if not lm_ids or len(target.uv) == 0:
+            return
+        p = self.params
+        pos = np.array([self.landmarks[l].position for l in lm_ids])
+        desc = np.array([self.landmarks[l].descriptor for l in lm_ids], np.uint8)
+        T_cw = se3_inv(target.T_world_cam)
+        Pc = pos @ T_cw[:3, :3].T + T_cw[:3, 3]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            uv = Pc[:, :2] / Pc[:, 2:3] * [self.calib.fx, self.calib.fy] + [self.calib.cx, self.calib.cy]
+        in_view = ((Pc[:, 2] > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < self.calib.width)
+                   & (uv[:, 1] >= 0) & (uv[:, 1] < self.calib.height))
+        if not in_view.any():
+            return
+        q, r, _ = match_in_window(np.where(in_view[:, None], uv, 0.0), as_words(desc),
+                                  np.full(len(lm_ids), p.fuse_radius), target.uv, as_words(target.descriptors),
+                                  p.triangulation_max_hamming, p.fuse_ratio, q_mask=in_view,
+                                  r_scale=scale ** target.octave.astype(float))
+        for qi, ri in zip(q.tolist(), r.tolist()):
+            lid = lm_ids[qi]
+            lm = self.landmarks.get(lid)
+            if lm is None or target.index in lm.obs:
+                continue
+            other = int(target.landmark[ri])
+            if other < 0:
+                lm.obs[target.index] = ri
+                target.landmark[ri] = lid
+            elif other != lid and other in self.landmarks:
+                keep, drop = (lm, self.landmarks[other])
+                if len(drop.obs) > len(keep.obs):
+                    keep, drop = drop, keep
+                self._merge(keep, drop)
+
+    def _merge(self, keep: MonoLandmark, drop: MonoLandmark) -> None:
+        for k, i in drop.obs.items():
+            if k not in keep.obs:
+                keep.obs[k] = i
+                self.keyframes[k].landmark[i] = keep.id
+            else:
+                self.keyframes[k].landmark[i] = -1
+        keep.visible += drop.visible
+        keep.found += drop.found
+        del self.landmarks[drop.id]
+        self.n_fused += 1
+
     # ----------------------------------------------------------------- new points
     def _triangulate_new_points(self, rec: MonoKeyframe, scale: float) -> None:
         """ORB-SLAM CreateNewMapPoints: match the keyframe's unmatched keypoints with those of
         its covisible keyframes along epipolar lines and triangulate the pairs that pass the
         parallax, depth, reprojection and scale-consistency checks."""
         for k in self._neighbours(rec, self.params.covisible_for_triangulation):
-            self._triangulate_pair(rec, self.keyframes[k], scale)
+            if k in self.keyframes:
+                self._triangulate_pair(rec, self.keyframes[k], scale)
 
     def _triangulate_pair(self, a: MonoKeyframe, b: MonoKeyframe, scale: float) -> None:
         p = self.params

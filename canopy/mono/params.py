@@ -62,6 +62,8 @@ class MonoParams:
     triangulation_max_hamming: int = 50
     triangulation_ratio: float = 0.9      # best < ratio x second best along the epipolar band
     epipolar_chi2: float = CHI2_95_1DOF   # px^2 (x sigma^2) distance to the epipolar line
+    fuse_radius: float = 3.0              # px at octave 0 (x scale): ORB-SLAM Fuse window
+    fuse_ratio: float = 0.8               # best < ratio x second best in the window
     ba_iterations: int = 10
     ba_passes: int = 2
     huber: float = math.sqrt(CHI2_95_2DOF)
