@@ -92,6 +92,8 @@ def with_overrides(cfg: RunConfig, clock: str | None = None, enhance: str | None
         cfg = replace(cfg, tracking=replace(cfg.tracking, use_lines=lines),
                       mapping=replace(cfg.mapping, use_lines=lines))
     runtime.validate()
+    if runtime.sensor == "mono" and getattr(cfg.tracking, "use_lines", False):
+        raise ConfigError("--lines", "line segments are not tracked in monocular mode (sensor: mono)")
     enhancement = cfg.enhancement if enhance is None else replace(cfg.enhancement, method=enhance)
     validate = getattr(enhancement, "validate", None)
     if callable(validate):
