@@ -36,3 +36,9 @@ def test_unknown_sensor_in_config_is_a_clear_error(tmp_path):
     res = _launch("--dataset", "kitti", "--config", str(cfg), "--max-frames", "2", "--quiet", timeout=120)
     assert res.returncode == 2
     assert "runtime.sensor" in res.stderr and "sonar" in res.stderr
+
+
+def test_lines_with_mono_is_refused_before_any_process_starts():
+    res = _launch("--dataset", "kitti", "--sensor", "mono", "--lines", "--max-frames", "2", "--quiet", timeout=120)
+    assert res.returncode == 2
+    assert "--lines" in res.stderr and "monocular" in res.stderr

@@ -51,3 +51,14 @@ def test_euroc_static_mav_invents_no_motion():
     assert set(res.statuses) == {"init"} and len(res.keyframe_indices) == 0 and len(res.map_points) == 0
     P = res.trajectory.poses
     assert np.allclose(P, P[0])
+
+
+def test_mono_lockstep_is_deterministic():
+    src = open_source("kitti", max_frames=10)
+    params = load_run_config("kitti").tracking
+    a = run_mono_sequential(src, params, MonoParams())
+    b = run_mono_sequential(src, params, MonoParams())
+    assert a.first_initialised is not None
+    np.testing.assert_array_equal(a.trajectory.poses, b.trajectory.poses)
+    assert a.keyframe_indices == b.keyframe_indices
+    np.testing.assert_array_equal(a.map_points, b.map_points)
