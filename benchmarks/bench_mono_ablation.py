@@ -208,8 +208,10 @@ def main(argv=None) -> int:
     ap.add_argument("--presets", nargs="*", default=["dusk-loop", "dark-rows"])
     ap.add_argument("--max-frames", type=int, default=300, help="frames of each generated preset")
     ap.add_argument("--gain", type=float, default=0.15, help="darkening gain of the KITTI copy")
-    ap.add_argument("--configs", nargs="*", default=list(CONFIGS), choices=list(CONFIGS))
+    ap.add_argument("--configs", nargs="*", default=list(CONFIGS), choices=list(CONFIGS),
+                    help="Canopy configurations to run (none given: ORB-SLAM3 only)")
     ap.add_argument("--no-peer", action="store_true", help="skip ORB-SLAM3")
+    ap.add_argument("--peer-reps", type=int, default=3, help="ORB-SLAM3 runs per sequence (it is not deterministic)")
     ap.add_argument("--only", nargs="*", default=None, help="run only the sequences whose name starts with one of these")
     ap.add_argument("--out", default=str(ROOT / "docs" / "results" / "bench_mono_ablation.json"))
     args = ap.parse_args(argv)
@@ -225,10 +227,12 @@ def main(argv=None) -> int:
         dark = None if gain is None else (lambda i, img, g=gain: darken(img, g, rng=1000 + i))
         source = ImageSource(base, dark)
         runs = [run_canopy(source, dataset, c) for c in args.configs]
-        if not args.no_peer:
+        for rep in range(0 if args.no_peer else args.peer_reps):   # ORB-SLAM3 is not deterministic
             peer = run_orbslam3(source, dataset)
-            if peer is not None:
-                runs.append(peer)
+            if peer is None:
+                break
+            peer["rep"] = rep
+            runs.append(peer)
         for row in runs:
             row["sequence"] = name
             rows.append(row)
