@@ -109,11 +109,10 @@ def run_canopy(source, dataset: str, config: str) -> dict:
         return img if enhance is None else enhance(img)[0]
 
     src = ImageSource(source.source, transform)
-    fast = None
-    if adaptive:  # AFE Eq. 18 on the frame tracking sees, Eq. 19 when too few corners
-        def fast(img):
-            return (adaptive_fast_threshold(img, ep.fast_omega), fallback_fast_threshold(img, ep.fast_omega),
-                    ep.min_keypoints)
+    def adaptive_fast(img):  # AFE Eq. 18 on the frame tracking sees, Eq. 19 when too few corners
+        return (adaptive_fast_threshold(img, ep.fast_omega), fallback_fast_threshold(img, ep.fast_omega),
+                ep.min_keypoints)
+    fast = adaptive_fast if adaptive else None
     t0 = time.perf_counter()
     res = run_mono_sequential(src, load_run_config(dataset).tracking, MonoParams(), fast=fast)
     wall = time.perf_counter() - t0
@@ -175,7 +174,7 @@ def _orbslam3_child(result_path: str, log_path: str, source: ImageSource, vocab:
 def run_orbslam3(source: ImageSource, dataset: str, timeout_s: float = 900.0) -> dict | None:
     vocab = Path(os.environ.get("CANOPY_CACHE_DIR", ROOT / "cache")) / "vocabulary" / PEER_VOCABULARY
     try:
-        import pyorbslam3  # noqa: F401
+        import pyorbslam3  # noqa: F401  (optional peer: skipped when it does not import)
     except Exception:
         return None
     if not vocab.is_file():

@@ -4,7 +4,6 @@ pose, and the updates carry the map back to tracking."""
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from canopy.frontend.geometry import rotation_angle, se3_exp, se3_inv, so3_exp
 from canopy.mono import MonoParams

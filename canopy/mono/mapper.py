@@ -13,14 +13,14 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
-import cv2
 import gtsam
 import numpy as np
 
 from canopy.frontend.geometry import se3_inv
-from canopy.frontend.matching import as_words, match_in_window, unique_by_reference
+from canopy.frontend.matching import as_words, match_in_window
 from canopy.frontend.messages import KeyframeData, LocalMapUpdate
 from canopy.mono.params import MonoParams
+from canopy.mono.triangulation import new_points_between
 from shared.types import StereoCalibration, Trajectory
 
 X = gtsam.symbol_shorthand.X
@@ -28,9 +28,6 @@ L = gtsam.symbol_shorthand.L
 # Landmarks triangulated here get ids far above tracking's (tracking reserves ids only for
 # the initial two-view map), so the two allocators never collide.
 MAPPER_ID_BASE = 1 << 40
-_COS_PARALLAX_MAX = 0.9998   # ORB-SLAM CreateNewMapPoints: rays must diverge more than this
-_EPIPOLE_MIN_PX = 100.0      # ORB-SLAM SearchForTriangulation: keypoints near the epipole are skipped
-_SCALE_CONSISTENCY = 1.5     # ORB-SLAM ratioFactor: distance ratio vs octave ratio tolerance
 
 
 def _ms(t0: float) -> float:
@@ -61,18 +58,6 @@ class MonoLandmark:
     recent: bool = True       # ORB-SLAM mlpRecentAddedMapPoints: culled strictly while recent
     visible: int = 1
     found: int = 1
-
-
-def triangulate_pairs(T1_cw: np.ndarray, T2_cw: np.ndarray, x1: np.ndarray, x2: np.ndarray) -> np.ndarray:
-    """Linear triangulation of normalised image points x1 (N,2), x2 (N,2) seen by cameras with
-    poses T_cam_world; world points (N,3) (NaN where degenerate)."""
-    P1, P2 = T1_cw[:3], T2_cw[:3]
-    A = np.stack([x1[:, 0:1] * P1[2] - P1[0], x1[:, 1:2] * P1[2] - P1[1],
-                  x2[:, 0:1] * P2[2] - P2[0], x2[:, 1:2] * P2[2] - P2[1]], axis=1)
-    _, _, vt = np.linalg.svd(A)
-    Xh = vt[:, -1, :]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return Xh[:, :3] / Xh[:, 3:4]
 
 
 class MonoMapper:
@@ -267,7 +252,7 @@ class MonoMapper:
 
     def _triangulate_pair(self, a: MonoKeyframe, b: MonoKeyframe, scale: float) -> None:
         p = self.params
-        Ta, Tb = se3_inv(a.T_world_cam), se3_inv(b.T_world_cam)
+        Tb = se3_inv(b.T_world_cam)
         baseline = np.linalg.norm(a.T_world_cam[:3, 3] - b.T_world_cam[:3, 3])
         lm_b = b.landmark[b.landmark >= 0]
         if len(lm_b) == 0:
@@ -275,72 +260,8 @@ class MonoMapper:
         Pb = np.array([self.landmarks[l].position for l in lm_b.tolist()]) @ Tb[:3, :3].T + Tb[:3, 3]
         if baseline / max(float(np.median(Pb[:, 2])), 1e-9) < p.min_baseline_depth_ratio:
             return
-        ia = np.flatnonzero(a.landmark < 0)
-        ib = np.flatnonzero(b.landmark < 0)
-        if len(ia) == 0 or len(ib) == 0:
-            return
-        # the epipolar constraint (x_b^T F_ba x_a = 0) as a mask over every free pair, then the
-        # two nearest descriptors inside the mask (OpenCV's brute-force Hamming matcher)
-        T_ba = Tb @ a.T_world_cam                      # camera a -> camera b
-        R, t = T_ba[:3, :3], T_ba[:3, 3]
-        tx = np.array([[0, -t[2], t[1]], [t[2], 0, -t[0]], [-t[1], t[0], 0]])
-        F = self._Kinv.T @ tx @ R @ self._Kinv
-        lines = np.column_stack([a.uv[ia], np.ones(len(ia))]) @ F.T          # (na,3) lines in image b
-        lines /= np.maximum(np.linalg.norm(lines[:, :2], axis=1), 1e-30)[:, None]   # unit normals: num = distance
-        la, ub = lines.astype(np.float32), b.uv[ib].astype(np.float32)
-        dist_px = la[:, 0:1] * ub[:, 0]                                         # (na,nb) point-line distances
-        dist_px += la[:, 1:2] * ub[:, 1]                                        # (broadcast: BLAS is slow for
-        dist_px += la[:, 2:3]                                                   #  an inner dimension of 3)
-        np.abs(dist_px, out=dist_px)
-        tol_b = (np.sqrt(p.epipolar_chi2) * self.pixel_sigma * scale ** b.octave[ib]).astype(np.float32)
-        mask = dist_px < tol_b[None, :]
-        # camera a's centre seen from b (the epipole): matches next to it carry no depth
-        ca = Tb[:3, :3] @ a.T_world_cam[:3, 3] + Tb[:3, 3]
-        if ca[2] > 1e-9:
-            e = ca[:2] / ca[2] * [self.calib.fx, self.calib.fy] + [self.calib.cx, self.calib.cy]
-            mask &= (((b.uv[ib] - e) ** 2).sum(1) > (_EPIPOLE_MIN_PX * scale ** b.octave[ib]) ** 2)[None, :]
-        if not mask.any():
-            return
-        knn = cv2.BFMatcher(cv2.NORM_HAMMING).knnMatch(np.ascontiguousarray(a.descriptors[ia]),
-                                                       np.ascontiguousarray(b.descriptors[ib]), k=2,
-                                                       mask=mask.astype(np.uint8))
-        big = 1 << 20
-        rows = [(m[0].queryIdx, m[0].trainIdx, m[0].distance, m[1].distance if len(m) > 1 else big)
-                for m in knn if len(m) > 0]
-        if not rows:
-            return
-        arr = np.array(rows)
-        qa, rb, dist, second = arr[:, 0].astype(np.int64), arr[:, 1].astype(np.int64), arr[:, 2], arr[:, 3]
-        keep = (dist <= p.triangulation_max_hamming) & (dist < p.triangulation_ratio * second)
-        qa, rb, dist = qa[keep], rb[keep], dist[keep].astype(np.int64)
-        u = unique_by_reference(qa, rb, dist)
-        ka, kb = ia[qa[u]], ib[rb[u]]
-        if len(ka) == 0:
-            return
-        xa = (np.column_stack([a.uv[ka], np.ones(len(ka))]) @ self._Kinv.T)[:, :2]
-        xb = (np.column_stack([b.uv[kb], np.ones(len(kb))]) @ self._Kinv.T)[:, :2]
-        Pw = triangulate_pairs(Ta, Tb, xa, xb)
-        good = np.isfinite(Pw).all(1)
-        Pw = np.where(good[:, None], Pw, 0.0)
-        Oa, Ob = a.T_world_cam[:3, 3], b.T_world_cam[:3, 3]
-        ra, rb_ = Pw - Oa, Pw - Ob
-        na, nb = np.linalg.norm(ra, axis=1), np.linalg.norm(rb_, axis=1)
-        cos_par = (ra * rb_).sum(1) / np.maximum(na * nb, 1e-30)
-        good &= cos_par < _COS_PARALLAX_MAX
-        Pa = Pw @ Ta[:3, :3].T + Ta[:3, 3]
-        Pb = Pw @ Tb[:3, :3].T + Tb[:3, 3]
-        good &= (Pa[:, 2] > 0) & (Pb[:, 2] > 0)
-        sa = self.pixel_sigma * scale ** a.octave[ka]
-        sb = self.pixel_sigma * scale ** b.octave[kb]
-        for P, uv, s in ((Pa, a.uv[ka], sa), (Pb, b.uv[kb], sb)):
-            with np.errstate(divide="ignore", invalid="ignore"):
-                proj = P[:, :2] / P[:, 2:3] * [self.calib.fx, self.calib.fy] + [self.calib.cx, self.calib.cy]
-            good &= ((proj - uv) ** 2).sum(1) < p.chi2_mono * s**2
-        # scale consistency: distance ratio should follow the pyramid-level ratio
-        ratio_dist = nb / np.maximum(na, 1e-30)
-        ratio_oct = scale ** (a.octave[ka] - b.octave[kb]).astype(float)
-        good &= (ratio_dist * _SCALE_CONSISTENCY >= ratio_oct) & (ratio_dist <= ratio_oct * _SCALE_CONSISTENCY)
-        for j in np.flatnonzero(good).tolist():
+        ka, kb, Pw = new_points_between(a, b, self.calib, p, scale, self.pixel_sigma)
+        for j in range(len(ka)):
             lid = self._next_id
             self._next_id += 1
             i_a, i_b = int(ka[j]), int(kb[j])
@@ -348,7 +269,7 @@ class MonoMapper:
                                                {a.index: i_a, b.index: i_b}, first_order=a.order, segment=a.segment)
             a.landmark[i_a] = lid
             b.landmark[i_b] = lid
-        self.n_triangulated += int(good.sum())
+        self.n_triangulated += len(ka)
 
     # ----------------------------------------------------------------- local BA
     def _local_window(self, rec: MonoKeyframe) -> tuple[list[int], list[int]]:
