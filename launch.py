@@ -67,6 +67,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--save-map", default=None, metavar="PATH",
                    help="write the final map (keyframes, landmarks, descriptors, covisibility) to PATH "
                         "(versioned msgpack, canopy.loop.map_io)")
+    p.add_argument("--sensor", choices=("stereo", "mono"), default=None,
+                   help="stereo pairs, or the left image only (monocular: two-view initialisation, "
+                        "a map without metric scale, Sim(3)-aligned ATE in metrics.json); default from "
+                        "the config: stereo")
     p.add_argument("--inspect", default=None, metavar="ENDPOINT",
                    help="publish every event on this ZeroMQ endpoint for remote clients and answer "
                         "requests on the next port, e.g. tcp://127.0.0.1:5560 (see tools/watch_run.py); "
@@ -96,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
                           max_frames=args.max_frames, enhance=args.enhance, inspect=args.inspect,
                           progress=not args.quiet, preset=args.preset, seed=args.seed, lines=args.lines,
                           record=args.record, inspect_keys=args.inspect_keys, loop=args.loop,
-                          save_map=args.save_map)
+                          save_map=args.save_map, sensor=args.sensor)
     except CanopyError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -33,7 +33,12 @@ class LocalMappingActor(Actor):
     name = "local_mapping"
 
     def setup(self, ctx: ActorContext) -> None:
-        self.mapper = LocalMapper(self.config["calib"], self.config["params"])
+        if self.config.get("sensor", "stereo") == "mono":
+            from canopy.mono import MonoMapper
+            self.mapper = MonoMapper(self.config["calib"], self.config.get("mono"),
+                                     pixel_sigma=float(self.config.get("pixel_sigma", 1.0)))
+        else:
+            self.mapper = LocalMapper(self.config["calib"], self.config["params"])
         self.snapshot_period = float(self.config.get("snapshot_period_s", 0.5))
         self.last_snapshot = 0.0
         self.n_keyframes = 0

@@ -33,7 +33,11 @@ class TrackingActor(Actor):
     def setup(self, ctx: ActorContext) -> None:
         c = self.config
         self.ring = FrameRing.attach(c["ring"])
-        self.tracker = Tracker(c["calib"], c["params"])
+        if c.get("sensor", "stereo") == "mono":
+            from canopy.mono import MonoTracker
+            self.tracker = MonoTracker(c["calib"], c["params"], c.get("mono"))
+        else:
+            self.tracker = Tracker(c["calib"], c["params"])
         self.lockstep = c["clock"] == "lockstep"
         self.backlog = FrameBacklog(max_frame_age(c["clock"], c["frame_period_s"], c["max_lag_frames"]))
         self.wait_s = float(c.get("lockstep_wait_s", 60.0))
@@ -88,12 +92,14 @@ class TrackingActor(Actor):
         self.counts[res.status] = self.counts.get(res.status, 0) + 1
         if res.lost_reason:
             self.counts[f"lost_reason_{res.lost_reason}"] = self.counts.get(f"lost_reason_{res.lost_reason}", 0) + 1
-        if res.is_keyframe:
+        # a monocular initialisation hands over two keyframes (reference and current)
+        keyframes = getattr(res, "keyframes", None) or ([res.keyframe] if res.is_keyframe else [])
+        for kf in keyframes:
             self.counts["keyframes"] += 1
-            res.keyframe.loop_epoch = self.loop_epoch
-            ctx.send("local_mapping", res.keyframe)
+            kf.loop_epoch = self.loop_epoch
+            ctx.send("local_mapping", kf)
             if self.lockstep:
-                self._wait_for_update(res.index, ctx)
+                self._wait_for_update(kf.index, ctx)
         # Lost frames (no reference) keep their absolute pose: ref_keyframe = -1.
         ref = res.reference_kf_index if res.T_ref_cam is not None else -1
         T_ref_cam = res.T_ref_cam if res.T_ref_cam is not None else np.eye(4)

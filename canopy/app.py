@@ -66,7 +66,7 @@ def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_fra
     ep = {name: Supervisor.endpoints(run_dir, name)
           for name in ("source", "enhancement", "tracking", "local_mapping", "loop_closing", "recorder")}
     to_recorder = ["recorder"] if record else []
-    loop_on = cfg.loop is not None and cfg.loop.enabled
+    loop_on = cfg.loop is not None and cfg.loop.enabled and cfg.runtime.sensor != "mono"  # the loop closer is stereo (SE(3))
     to_loop = ["loop_closing"] if loop_on else []
     events = f"ipc://{run_dir}/supervisor.events"
     rt = cfg.runtime
@@ -86,11 +86,13 @@ def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_fra
              {"in_ring": rings["raw"], "out_ring": rings["enhanced"], "params": cfg.enhancement}, ["tracking"]),
         spec("tracking", "actors.tracking:TrackingActor",
              {"ring": rings["enhanced"], "calib": calib, "params": cfg.tracking,
-              "enhancement": cfg.enhancement, "lockstep_wait_s": rt.lockstep_wait_s},
+              "enhancement": cfg.enhancement, "lockstep_wait_s": rt.lockstep_wait_s,
+              "sensor": rt.sensor, "mono": cfg.mono},
              ["local_mapping", "source", *to_recorder]),
         spec("local_mapping", "actors.local_mapping:LocalMappingActor",
              {"calib": calib, "params": cfg.mapping, "snapshot_period_s": rt.map_snapshot_period_s,
               "lockstep_wait_s": rt.lockstep_wait_s, "save_map": save_map,
+              "sensor": rt.sensor, "mono": cfg.mono, "pixel_sigma": cfg.tracking.pixel_sigma,
               "vocabulary_id": Path(cfg.loop.vocabulary).name if loop_on and cfg.loop.vocabulary else
               ("default" if loop_on else "")},
              ["tracking", *to_recorder, *to_loop]),
@@ -105,11 +107,12 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
              inspect: str | None = None, progress: bool = True, preset: str | None = None,
              seed: int = 0, lines: bool | None = None, record: str | None = None,
              inspect_keys: str | None = None, loop: bool | None = None,
-             save_map: str | None = None) -> RunResult:
+             save_map: str | None = None, sensor: str | None = None) -> RunResult:
     if dataset not in DATASETS:
         from shared.errors import ConfigError
         raise ConfigError("--dataset", f"unknown dataset {dataset!r}; choose one of {DATASETS}")
-    cfg = with_overrides(load_run_config(dataset, config), clock=clock, enhance=enhance, lines=lines, loop=loop)
+    cfg = with_overrides(load_run_config(dataset, config), clock=clock, enhance=enhance, lines=lines, loop=loop,
+                         sensor=sensor)
     if cfg.loop is not None and cfg.loop.enabled:  # a missing vocabulary is an error before any process starts
         from canopy.loop.vocabulary import check_vocabulary
         check_vocabulary(cfg.loop.vocabulary)
@@ -171,7 +174,7 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
                 "path": str(source.root) if hasattr(source, "root") else path,
                 "source": source.name, "clock": cfg.runtime.clock,
                 "enhancement": getattr(cfg.enhancement, "method", "none"), "config_file": cfg.source_file,
-                "lines": bool(cfg.tracking.use_lines), "recording": record_path,
+                "lines": bool(cfg.tracking.use_lines), "recording": record_path, "sensor": cfg.runtime.sensor,
                 "recording_repaired_messages": repaired,
                 "loop_closing": bool(cfg.loop is not None and cfg.loop.enabled),
                 "outcome": outcome.reason, "ok": outcome.ok, "wall_s": outcome.wall_s,
@@ -215,7 +218,8 @@ def prepare_out_dir(out_dir: Path) -> Path:
 def _config_dict(cfg) -> dict:
     return {"runtime": asdict(cfg.runtime), "enhancement": asdict(cfg.enhancement),
             "tracking": asdict(cfg.tracking), "mapping": asdict(cfg.mapping),
-            **({"loop": asdict(cfg.loop)} if cfg.loop is not None else {})}
+            **({"loop": asdict(cfg.loop)} if cfg.loop is not None else {}),
+            **({"mono": asdict(cfg.mono)} if cfg.mono is not None and cfg.runtime.sensor == "mono" else {})}
 
 
 def _write_config(out_dir: Path, cfg) -> None:

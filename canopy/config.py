@@ -20,6 +20,7 @@ MIN_RING_SLOTS, MAX_RING_SLOTS = 2, 256
 # Actors send a heartbeat every second (actors.runtime.STATS_PERIOD_S); a timeout shorter than
 # two periods would call a healthy actor hung on one late message.
 MIN_HEARTBEAT_TIMEOUT_S = 2.0
+SENSORS = ("stereo", "mono")
 
 
 @dataclass(frozen=True)
@@ -34,8 +35,11 @@ class RuntimeParams:
     lockstep_wait_s: float = 60.0    # longest wait for a map update in lockstep
     map_snapshot_period_s: float = 0.5
     seed: int = 0
+    sensor: str = "stereo"           # stereo | mono (the left image only; canopy.mono)
 
     def validate(self) -> None:
+        if self.sensor not in SENSORS:
+            raise ConfigError("runtime.sensor", f"must be one of {SENSORS}, got {self.sensor!r}")
         if self.clock not in CLOCK_MODES:
             raise ConfigError("runtime.clock", f"must be one of {CLOCK_MODES}, got {self.clock!r}")
         if not MIN_RING_SLOTS <= self.ring_slots <= MAX_RING_SLOTS:
@@ -62,6 +66,7 @@ class RunConfig:
     mapping: object
     source_file: str
     loop: object = None              # canopy.loop.LoopParams (section ``loop``; issue 10)
+    mono: object = None              # canopy.mono.MonoParams (section ``mono``, used with sensor: mono)
 
 
 def default_config_path(dataset: str) -> Path:
@@ -73,10 +78,11 @@ def load_run_config(dataset: str, config_path: str | Path | None = None) -> RunC
     from canopy.enhance import EnhanceParams
     from canopy.frontend import TrackingParams
     from canopy.loop.params import LoopParams
+    from canopy.mono.params import MonoParams
 
     path = Path(config_path) if config_path else default_config_path(dataset)
     raw = load_yaml(path)
-    known = {"runtime", "enhancement", "tracking", "mapping", "loop"}
+    known = {"runtime", "enhancement", "tracking", "mapping", "loop", "mono"}
     unknown = sorted(set(raw) - known)
     if unknown:
         raise ConfigError(path, f"unknown section(s) {unknown}; expected {sorted(known)}")
@@ -93,18 +99,24 @@ def load_run_config(dataset: str, config_path: str | Path | None = None) -> RunC
         mapping=params_from_mapping(MappingParams, raw.get("mapping"), src),
         source_file=src,
         loop=params_from_mapping(LoopParams, raw.get("loop"), src),
+        mono=params_from_mapping(MonoParams, raw.get("mono"), src),
     )
 
 
 def with_overrides(cfg: RunConfig, clock: str | None = None, enhance: str | None = None,
-                   lines: bool | None = None, loop: bool | None = None) -> RunConfig:
+                   lines: bool | None = None, loop: bool | None = None,
+                   sensor: str | None = None) -> RunConfig:
     if loop is not None and cfg.loop is not None:
         cfg = replace(cfg, loop=replace(cfg.loop, enabled=loop))
     runtime = cfg.runtime if clock is None else replace(cfg.runtime, clock=clock)
+    if sensor is not None:
+        runtime = replace(runtime, sensor=sensor)
     if lines is not None:  # points + lines needs both tracking and local BA to agree
         cfg = replace(cfg, tracking=replace(cfg.tracking, use_lines=lines),
                       mapping=replace(cfg.mapping, use_lines=lines))
     runtime.validate()
+    if runtime.sensor == "mono" and getattr(cfg.tracking, "use_lines", False):
+        raise ConfigError("--lines", "line segments are not tracked in monocular mode (sensor: mono)")
     enhancement = cfg.enhancement if enhance is None else replace(cfg.enhancement, method=enhance)
     validate = getattr(enhancement, "validate", None)
     if callable(validate):

@@ -202,6 +202,25 @@ def ape(est_poses, ref_poses, align: str = "se3") -> dict:
     return error_statistics(np.linalg.norm(est[:, :3, 3] - ref[:, :3, 3], axis=1))
 
 
+def ate_sim3(est_poses, ref_poses) -> dict:
+    """APE after a Sim(3) alignment (evo ``-as``), with the scale that aligns them.
+
+    For monocular runs, whose map has no metric scale: ``scale`` is the Umeyama factor
+    s in ``ref ~= s R est + t`` (metres per map unit); comparing it over windows of a run
+    shows the scale drift. ``None`` entries when fewer than 3 poses or no motion.
+    """
+    est, ref = _check_pair(est_poses, ref_poses)
+    pos = est[:, :3, 3]
+    if len(est) < 3 or float(np.sum((pos - pos.mean(axis=0)) ** 2)) == 0.0:
+        out = error_statistics(np.zeros(0))
+        out["scale"] = None
+        return out
+    _, _, s = umeyama_alignment(pos.T, ref[:, :3, 3].T, with_scale=True)
+    out = ape(est, ref, align="sim3")
+    out["scale"] = float(s)
+    return out
+
+
 def _pairs_by_index(n: int, delta: int, all_pairs: bool) -> np.ndarray:
     """evo filters.filter_pairs_by_index."""
     if all_pairs:
@@ -369,16 +388,24 @@ def motion_summary(poses) -> dict:
 KITTI_MIN_PATH_M = 10.0
 
 
-def evaluate_trajectory(est: Trajectory, gt: Trajectory | None, max_diff: float = 0.01) -> dict:
+def evaluate_trajectory(est: Trajectory, gt: Trajectory | None, max_diff: float = 0.01,
+                        valid: np.ndarray | None = None) -> dict:
     """All run metrics in one JSON-ready dict.
 
-    Keys: ``ate`` (APE, SE(3) aligned), ``rpe_frame`` (delta 1 frame),
+    Keys: ``ate`` (APE, SE(3) aligned), ``ate_sim3`` (APE after a Sim(3) alignment, with its
+    ``scale``: the figure for monocular runs), ``rpe_frame`` (delta 1 frame),
     ``rpe_metre`` (delta 1 m, ``None`` when no pair of poses is 1 m apart
     along the path), ``kitti``, ``n_matched``, ``est_motion``, ``gt_motion``.
     Without ground truth, or when no stamp matches within ``max_diff``
-    seconds, the error entries are ``None`` and ``note`` says why.
+    seconds, the error entries are ``None`` and ``note`` says why. ``valid`` (bool per
+    estimated pose) leaves poses out, e.g. a monocular run's frames before initialisation.
     """
-    out = {"ate": None, "rpe_frame": None, "rpe_metre": None, "kitti": None, "n_matched": 0,
+    if valid is not None:
+        valid = np.asarray(valid, bool).reshape(-1)
+        if len(valid) != len(est):
+            raise ValueError(f"valid has {len(valid)} entries for {len(est)} poses")
+        est = Trajectory(est.stamps[valid], est.poses[valid], meta=dict(est.meta))
+    out = {"ate": None, "ate_sim3": None, "rpe_frame": None, "rpe_metre": None, "kitti": None, "n_matched": 0,
            "max_diff_s": float(max_diff),
            "est_motion": motion_summary(est.poses), "gt_motion": None, "note": None}
     if gt is None:
@@ -392,6 +419,7 @@ def evaluate_trajectory(est: Trajectory, gt: Trajectory | None, max_diff: float 
         return out
     e, g = est.poses[ia], gt.poses[ib]
     out["ate"] = ape(e, g, align="se3")
+    out["ate_sim3"] = ate_sim3(e, g)
     out["rpe_frame"] = rpe(e, g, delta=1, unit="frames")
     pairs_m = rpe_pairs(e, 1.0, "m")
     out["rpe_metre"] = rpe(e, g, delta=1.0, unit="m") if len(pairs_m) else None

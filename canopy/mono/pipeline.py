@@ -1,0 +1,77 @@
+"""In-process lockstep run of monocular tracking -> local mapping (the mono twin of
+``canopy.pipeline.run_sequential``): track a frame; hand every keyframe it produced to the
+mapper and apply each update before the next frame. Frame poses are kept relative to their
+reference keyframe and re-expressed with the final keyframe poses.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from canopy.frontend import TrackingParams
+from canopy.mono.mapper import MonoMapper
+from canopy.mono.params import MonoParams
+from canopy.mono.tracker import STATUS_INIT, STATUS_LOST, MonoTracker
+from shared.types import Trajectory
+
+
+@dataclass
+class MonoRunResult:
+    trajectory: Trajectory            # every frame (frames before initialisation: the start pose)
+    keyframe_trajectory: Trajectory
+    map_points: np.ndarray
+    statuses: list[str]
+    keyframe_indices: list[int]
+    first_initialised: int | None     # frame index where the first map was made
+    n_initialisations: int
+    tracking_timings: list[dict[str, float]] = field(default_factory=list)
+    mapping_timings: list[dict[str, float]] = field(default_factory=list)
+
+    @property
+    def tracked_mask(self) -> np.ndarray:
+        return np.array([s not in (STATUS_INIT, STATUS_LOST) for s in self.statuses], bool)
+
+
+def run_mono_sequential(source, tracking_params: TrackingParams | None = None, mono_params: MonoParams | None = None,
+                        max_frames: int | None = None, fast=None) -> MonoRunResult:
+    """``fast``: optional callable image -> (threshold, fallback, min_keypoints) (AFE Eq. 18-19)."""
+    tracking_params = tracking_params or TrackingParams()
+    mono_params = mono_params or MonoParams()
+    calib = source.calibration
+    tracker = MonoTracker(calib, tracking_params, mono_params)
+    mapper = MonoMapper(calib, mono_params, pixel_sigma=tracking_params.pixel_sigma)
+    n = len(source) if max_frames is None else min(len(source), max_frames)
+    stamps, statuses, refs, rel, track_poses, kf_indices = [], [], [], [], [], []
+    track_t, map_t = [], []
+    first_init = None
+    for i in range(n):
+        frame = source.frame(i)
+        if fast is not None:
+            thr, fb, mk = fast(frame.left)
+            res = tracker.track(frame, fast_threshold=thr, fast_fallback=fb, fast_min_keypoints=mk)
+        else:
+            res = tracker.track(frame)
+        track_t.append(res.timings)
+        stamps.append(frame.timestamp)
+        statuses.append(res.status)
+        track_poses.append(res.T_world_cam.copy())
+        for kf in res.keyframes:
+            kf_indices.append(kf.index)
+            update = mapper.insert_keyframe(kf)
+            map_t.append(update.timings)
+            tracker.apply_map_update(update)
+        if res.keyframes and first_init is None and res.keyframe_reason == "initialisation":
+            first_init = frame.index
+        refs.append(res.reference_kf_index)
+        rel.append(None if res.T_ref_cam is None else res.T_ref_cam.copy())
+    kf_final = mapper.keyframe_poses()
+    poses = []
+    for i, (T_rel, ref) in enumerate(zip(rel, refs)):
+        poses.append(kf_final[ref] @ T_rel if T_rel is not None and ref in kf_final else track_poses[i])
+    for i, s in enumerate(statuses):
+        if s == STATUS_LOST and i > 0:
+            poses[i] = poses[i - 1]
+    traj = Trajectory(np.asarray(stamps), np.asarray(poses).reshape(-1, 4, 4), meta={"statuses": statuses})
+    return MonoRunResult(traj, mapper.keyframe_trajectory(), mapper.map_points(), statuses, kf_indices, first_init,
+                         tracker.n_initialisations, track_t, map_t)
