@@ -83,7 +83,9 @@ class TrackingActor(Actor):
         return handle.sent_at
 
     def _track(self, frame: StereoFrame, handle: FrameHandle, ctx: ActorContext) -> None:
-        if self.adaptive_fast:  # AFE Eq. 18, and Eq. 19 when too few corners result
+        # AFE Eq. 18, and Eq. 19 when too few corners result; only on frames the enhancement changed
+        # (auto's "none" frames keep the fixed threshold, so auto costs nothing on clean data)
+        if self.adaptive_fast and (handle.info or {}).get("method", "none") != "none":
             res = self.tracker.track(frame, fast_threshold=adaptive_fast_threshold(frame.left, self.fast_omega),
                                      fast_fallback=fallback_fast_threshold(frame.left, self.fast_omega),
                                      fast_min_keypoints=self.fast_min_keypoints)
