@@ -219,7 +219,7 @@ def test_a_run_announces_itself_answers_status_and_stops_on_request(tmp_path):
             proc.kill()
             proc.communicate()
     assert status is not None and status.ok and status.payload["frames_done"] >= 10
-    assert set(status.payload["actors"]) == {"source", "enhancement", "tracking", "local_mapping"}
+    assert set(status.payload["actors"]) == {"source", "enhancement", "tracking", "local_mapping", "loop_closing"}
     assert stop is not None and stop.ok
     assert end is not None and end.reason == "stopped by a remote client" and not end.ok
     assert end.run_id == status.run_id

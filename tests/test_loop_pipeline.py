@@ -64,9 +64,10 @@ def test_frames_after_a_blank_gap_relocalise_into_the_same_map(tmp_path):
                                                  tmp_path / "gap", parse_range("20-24")))
     res = run_sequential(src, TrackingParams())
     st = np.array(res.statuses)
-    assert (st[20:25] == "lost").all()
+    # the first blank frames are bridged by the motion model ("predicted"), then reported lost
+    assert np.isin(st[20:25], ["predicted", "lost"]).all() and (st[20:25] == "lost").any()
     assert (st[25:] == "ok").all()  # no "init": the same map, no new segment
-    tracked = st != "lost"
+    tracked = np.isin(st, ["init", "ok"])
     ate = evaluate_trajectory(Trajectory(res.trajectory.stamps[tracked], res.trajectory.poses[tracked]),
                               src.ground_truth)["ate"]["rmse"]
     assert ate < 0.3
