@@ -21,7 +21,7 @@ import gtsam
 import numpy as np
 
 from canopy.backend.local_ba import LocalBundleAdjustmentMixin
-from canopy.backend.map_store import Keyframe, Landmark, LineLandmark
+from canopy.backend.map_store import Keyframe, Landmark, LineLandmark, local_map_update
 from canopy.backend.params import MappingParams
 from canopy.frontend.matching import as_words, _popcount64
 from canopy.frontend.messages import KeyframeData, LocalMapUpdate
@@ -259,12 +259,7 @@ class LocalMapper(LocalBundleAdjustmentMixin):
 
     # ----------------------------------------------------------------- update for tracking
     def _make_update(self, rec: Keyframe, local: list[int], fixed: list[int]) -> LocalMapUpdate:
-        ids = sorted({lid for k in list(local) + list(fixed)
-                      for lid in self.keyframes[k].landmark[self.keyframes[k].landmark >= 0].tolist()})
-        pos = np.array([self.landmarks[i].position for i in ids], float).reshape(-1, 3)
-        desc = np.array([self.landmarks[i].descriptor for i in ids], np.uint8).reshape(-1, 32)
-        poses = {k: self.keyframes[k].T_world_cam.copy() for k in local}
-        update = LocalMapUpdate(rec.index, np.asarray(ids, np.int64), pos, desc, poses)
+        update = local_map_update(rec.index, self.keyframes, self.landmarks, local, fixed)
         if self.params.use_lines:
             lids = sorted({lid for k in list(local) + list(fixed)
                            for lid in self.keyframes[k].line_landmark.tolist() if lid >= 0})

@@ -54,3 +54,17 @@ class LineLandmark:
     obs: dict[int, int] = field(default_factory=dict)  # keyframe index -> line row
     first_order: int = 0
     segment: int = 0
+
+
+def local_map_update(index: int, keyframes: dict, landmarks: dict, local: list[int], fixed: list[int]):
+    """The local map tracking needs after keyframe ``index``: the landmarks seen by the local and
+    fixed keyframes (ids, positions, descriptors) and the refined poses of the local ones. Shared
+    by the stereo and the monocular mapper (both keep ``keyframes[k].landmark`` / ``landmarks[id]``)."""
+    from canopy.frontend.messages import LocalMapUpdate
+
+    ids = sorted({lid for k in list(local) + list(fixed)
+                  for lid in keyframes[k].landmark[keyframes[k].landmark >= 0].tolist()})
+    pos = np.array([landmarks[i].position for i in ids], float).reshape(-1, 3)
+    desc = np.array([landmarks[i].descriptor for i in ids], np.uint8).reshape(-1, 32)
+    poses = {k: keyframes[k].T_world_cam.copy() for k in local}
+    return LocalMapUpdate(index, np.asarray(ids, np.int64), pos, desc, poses)

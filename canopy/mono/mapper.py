@@ -18,6 +18,7 @@ import numpy as np
 
 from canopy.frontend.geometry import se3_inv
 from canopy.frontend.matching import as_words, match_in_window
+from canopy.backend.map_store import local_map_update
 from canopy.frontend.messages import KeyframeData, LocalMapUpdate
 from canopy.mono.params import MonoParams
 from canopy.mono.triangulation import new_points_between
@@ -404,9 +405,4 @@ class MonoMapper:
 
     # ----------------------------------------------------------------- update for tracking
     def _make_update(self, rec: MonoKeyframe, local: list[int], fixed: list[int]) -> LocalMapUpdate:
-        ids = sorted({lid for k in list(local) + list(fixed)
-                      for lid in self.keyframes[k].landmark[self.keyframes[k].landmark >= 0].tolist()})
-        pos = np.array([self.landmarks[i].position for i in ids], float).reshape(-1, 3)
-        desc = np.array([self.landmarks[i].descriptor for i in ids], np.uint8).reshape(-1, 32)
-        poses = {k: self.keyframes[k].T_world_cam.copy() for k in local}
-        return LocalMapUpdate(rec.index, np.asarray(ids, np.int64), pos, desc, poses)
+        return local_map_update(rec.index, self.keyframes, self.landmarks, local, fixed)
