@@ -219,9 +219,11 @@ class Supervisor:
         except ProtocolError as exc:
             self.on_event(ActorError(actor="supervisor", error=f"malformed event dropped: {exc}"))
             return None
+        # Record first, then publish: a signal that interrupts between the two must never leave a
+        # remote client holding a pose that the run's own outputs do not have.
+        self.on_event(msg)
         if inspect is not None:
             inspect.publish(msg.KIND, payload)
-        self.on_event(msg)
         return msg
 
     def _drain(self, events, inspect) -> None:
