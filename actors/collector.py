@@ -311,7 +311,8 @@ class RunCollector:
         if len(cam) >= 2:
             try:
                 title = f"{run_info.get('source', '')} ({run_info.get('clock', '')})"
-                files["plot"] = str(plot_trajectory_png(out_dir / "trajectory.png", cam, gt, title=title))
+                align = "sim3" if run_info.get("sensor") == "mono" else "se3"  # a mono map has no metric scale
+                files["plot"] = str(plot_trajectory_png(out_dir / "trajectory.png", cam, gt, title=title, align=align))
             except Exception as exc:  # a plot must never cost the user the numbers
                 files["plot_error"] = f"{type(exc).__name__}: {exc}"
         return {"metrics": metrics, "stats": stats, "files": files}

@@ -148,14 +148,50 @@ def top_view_axes(poses: np.ndarray) -> tuple[int, int]:
     return a, b
 
 
+PLOT_ALIGNMENTS = ("se3", "sim3")
+
+
+def align_for_plot(est: Trajectory, gt: Trajectory | None, align: str = "se3",
+                   max_diff: float = 0.01) -> tuple[np.ndarray, str, str]:
+    """Positions of ``est`` as drawn beside ``gt``: (positions (N, 3), legend label, ATE text).
+
+    ``align`` "se3" (stereo: metric map, evo ``-a``) or "sim3" (monocular: the map has no
+    metric scale, evo ``-as``; Umeyama 1991 with scale). The alignment is fitted on the stamps
+    matched within ``max_diff`` s and applied to every pose; with Sim(3) the fitted scale
+    (metres per map unit) is printed in the label and the ATE text, because it is part of the
+    result of a monocular run (its drift is reported, not hidden). No ``gt``: positions as they are.
+    """
+    if align not in PLOT_ALIGNMENTS:
+        raise ValueError(f"plot alignment must be one of {PLOT_ALIGNMENTS}, got {align!r}")
+    est_pos = est.positions.copy()
+    if gt is None or not len(gt) or not len(est):
+        return est_pos, "estimate", ""
+    ia, ib = metrics.associate(est.stamps, gt.stamps, max_diff)
+    if len(ia) < 1:
+        return est_pos, "estimate", f"ATE: no stamps matched within {max_diff} s"
+    if align == "sim3":
+        ate = metrics.ate_sim3(est.poses[ia], gt.poses[ib])
+        if ate.get("scale") is None:  # < 3 poses or no motion: a scale cannot be fitted
+            return est_pos, "estimate", f"ATE: Sim(3) alignment needs motion ({ate['n']} poses)"
+        R, t, s = metrics.umeyama_alignment(est.positions[ia].T, gt.positions[ib].T, with_scale=True)
+        scale_text = f"scale {s:.4g} m/unit"
+        return (s * est.positions @ R.T + t, f"estimate (Sim(3) aligned, {scale_text})",
+                f"ATE RMSE {ate['rmse']:.4f} m (Sim(3) aligned, {scale_text}, {ate['n']} poses)")
+    R, t, _ = metrics.umeyama_alignment(est.positions[ia].T, gt.positions[ib].T)
+    ate = metrics.ape(est.poses[ia], gt.poses[ib], align="se3")
+    return (est.positions @ R.T + t, "estimate (SE(3) aligned)",
+            f"ATE RMSE {ate['rmse']:.4f} m (SE(3) aligned, {ate['n']} poses)")
+
+
 def plot_trajectory_png(path, est: Trajectory, gt: Trajectory | None = None, title: str = "",
-                        max_diff: float = 0.01) -> Path:
+                        max_diff: float = 0.01, align: str = "se3") -> Path:
     """Top view and x/y/z against time of ``est`` (and ``gt``).
 
-    With ``gt``, ``est`` is SE(3)-aligned to it on the stamps matched within
-    ``max_diff`` s and the title carries the ATE RMSE. The top view looks along
-    the vertical (``top_view_axes``, of gt when given, else est): x-z for camera
-    frames (y down). Headless (Agg backend).
+    With ``gt``, ``est`` is aligned to it (``align_for_plot``: SE(3), or Sim(3) with the scale
+    in the legend and title for a monocular run) on the stamps matched within ``max_diff`` s
+    and the title carries the ATE RMSE. The top view looks along the vertical
+    (``top_view_axes``, of gt when given, else est): x-z for camera frames (y down).
+    Headless (Agg backend).
     """
     import matplotlib
 
@@ -164,19 +200,7 @@ def plot_trajectory_png(path, est: Trajectory, gt: Trajectory | None = None, tit
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    est_pos = est.positions.copy()
-    label_est = "estimate"
-    ate_text = ""
-    if gt is not None and len(gt) and len(est):
-        ia, ib = metrics.associate(est.stamps, gt.stamps, max_diff)
-        if len(ia) >= 1:
-            R, t, _ = metrics.umeyama_alignment(est.positions[ia].T, gt.positions[ib].T)
-            est_pos = est.positions @ R.T + t
-            ate = metrics.ape(est.poses[ia], gt.poses[ib], align="se3")
-            ate_text = f"ATE RMSE {ate['rmse']:.4f} m (SE(3) aligned, {ate['n']} poses)"
-            label_est = "estimate (SE(3) aligned)"
-        else:
-            ate_text = f"ATE: no stamps matched within {max_diff} s"
+    est_pos, label_est, ate_text = align_for_plot(est, gt, align, max_diff)
     a, b = top_view_axes(gt.poses if gt is not None and len(gt) else est.poses)
     names = "xyz"
 

@@ -68,3 +68,28 @@ def test_sim3_of_a_still_trajectory_has_no_scale():
     still = np.tile(np.eye(4), (20, 1, 1))
     res = ate_sim3(still, gt.poses)
     assert res["scale"] is None
+
+
+def test_mono_plot_draws_the_estimate_sim3_aligned_with_its_scale(tmp_path):
+    """A monocular run's plot: the scale-free estimate lands on the ground truth, scale printed."""
+    import cv2
+
+    from canopy import report
+
+    gt = _ground_truth()
+    est = _similar(gt, s=23.5)
+    pos, label, text = report.align_for_plot(est, gt, align="sim3")
+    assert np.abs(pos - gt.positions).max() < 1e-9
+    assert "Sim(3)" in label and "scale 23.5 m/unit" in label
+    assert "scale 23.5 m/unit" in text and "ATE RMSE 0.0000 m" in text
+    # SE(3) cannot absorb the scale: drawn that way the estimate sits far from the truth
+    pos_se3, label_se3, _ = report.align_for_plot(est, gt, align="se3")
+    assert np.abs(pos_se3 - gt.positions).max() > 1.0 and "scale" not in label_se3
+    png = report.plot_trajectory_png(tmp_path / "mono.png", est, gt, title="mono", align="sim3")
+    assert cv2.imread(str(png)) is not None
+    with pytest.raises(ValueError, match="plot alignment"):
+        report.align_for_plot(est, gt, align="sim4")
+    # no motion (a mono run that never initialised): no scale to fit, drawn as it is
+    still = Trajectory(gt.stamps.copy(), np.tile(np.eye(4), (len(gt), 1, 1)))
+    pos_still, _, text_still = report.align_for_plot(still, gt, align="sim3")
+    assert np.all(pos_still == 0.0) and "needs motion" in text_still
