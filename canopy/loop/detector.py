@@ -136,6 +136,11 @@ class LoopDetector:
                       key=lambda k: (-score[k], k))
         return kept
 
+    def verify(self, query: PlaceKeyframe, cand: PlaceKeyframe):
+        """Geometric verification of one candidate (stereo PnP; the monocular detector
+        overrides it with PnP + Sim(3), ``canopy.loop.mono``)."""
+        return verify_candidate(query, cand, self.calib, self.params, self.vocabulary)
+
     def _detect(self, kf: PlaceKeyframe) -> LoopConstraint | None:
         p = self.params
         self.stats.queries += 1
@@ -156,7 +161,7 @@ class LoopDetector:
         self._consistent_groups = current
         self.stats.consistent += len(consistent)
         for c in consistent:
-            v = verify_candidate(kf, self.keyframes[c], self.calib, p, self.vocabulary)
+            v = self.verify(kf, self.keyframes[c])
             reason = v.kind
             if v.constraint is not None:
                 why = self.plausible(v.constraint) if self.plausible is not None else ""

@@ -79,12 +79,14 @@ class MonoMapper:
         self.n_culled = 0
         self.n_triangulated = 0
         self.n_fused = 0
+        self._scale_factor = 1.2      # ORB pyramid scale, from the keyframes (KeyframeData.scale_factor)
 
     # ----------------------------------------------------------------- public API
     def insert_keyframe(self, kf: KeyframeData) -> LocalMapUpdate:
         timings: dict[str, float] = {}
         t_all = time.perf_counter()
         t0 = time.perf_counter()
+        self._scale_factor = float(kf.scale_factor)
         rec = self._insert(kf)
         timings["insert"] = _ms(t0)
         t0 = time.perf_counter()
@@ -129,6 +131,22 @@ class MonoMapper:
 
     def map_lines(self) -> np.ndarray:
         return np.zeros((0, 2, 3))   # the monocular map has points only
+
+    def fuse_loop(self, query: int, candidate: int) -> int:
+        """After a loop correction (ORB-SLAM SearchAndFuse): the points around the matched old
+        keyframe are projected into the query keyframe and its neighbours, so the two passes
+        over the place share landmarks (and covisibility) from now on. Returns merges + new
+        observations made."""
+        if query not in self.keyframes or candidate not in self.keyframes:
+            return 0
+        n = self.params.fuse_loop_neighbours
+        old_side = [candidate] + self._neighbours(self.keyframes[candidate], n)
+        new_side = [query] + self._neighbours(self.keyframes[query], n)
+        lm_old = self._landmarks_of(old_side)
+        before = self.n_fused + sum(len(lm.obs) for lm in self.landmarks.values())
+        for k in new_side:
+            self._fuse_into(self.keyframes[k], lm_old, self._scale_factor)
+        return self.n_fused + sum(len(lm.obs) for lm in self.landmarks.values()) - before
 
     # ----------------------------------------------------------------- insertion
     def _insert(self, kf: KeyframeData) -> MonoKeyframe:

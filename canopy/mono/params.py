@@ -72,6 +72,20 @@ class MonoParams:
     min_observations: int = 2
     fixed_pose_sigma: float = 1e-6
 
+    # --- loop closing in Sim(3) (ORB-SLAM ComputeSim3 / OptimizeEssentialGraph, monocular) --
+    # the rest (detection, PnP verification, drift gate) is the stereo ``loop`` section
+    loop_enabled: bool = True             # with --loop: close loops in mono too
+    sim3_iterations: int = 200            # RANSAC iterations of Horn's 3-point similarity
+    sim3_chi2: float = 9.210              # ORB-SLAM Sim3Solver: chi2 99 %, 2 DoF (x sigma^2 of the octave)
+    sim3_min_inliers: int = 20            # ORB-SLAM: 20 inliers of the Sim3 RANSAC
+    # 3D agreement of a Sim(3) inlier, relative to the point's distance: reprojection alone
+    # cannot see a wrong depth when the two cameras are close (a revisit along the same path)
+    sim3_max_relative_3d_error: float = 0.1
+    sim3_max_rotation_disagreement_deg: float = 5.0  # Sim(3) rotation vs the PnP one
+    loop_max_scale_change: float = 0.5    # a loop scale outside [1/(1+x), 1+x] is refused
+    sigma_log_scale: float = 0.01         # pose-graph edges: log-scale sigma (rotation/translation: ``loop``)
+    fuse_loop_neighbours: int = 10        # keyframes around each side whose points are fused after a loop
+
     def validate(self) -> "MonoParams":
         def need(ok: bool, name: str, what: str) -> None:
             if not ok:
@@ -87,6 +101,10 @@ class MonoParams:
         need(self.window_size >= 2, "window_size", "must be >= 2")
         need(self.max_frames_between_keyframes >= 1, "max_frames_between_keyframes", "must be >= 1")
         need(self.lost_frames_to_reset >= 1, "lost_frames_to_reset", "must be >= 1")
+        need(self.sim3_iterations >= 1, "sim3_iterations", "must be >= 1")
+        need(self.sim3_min_inliers >= 3, "sim3_min_inliers", "must be >= 3")
+        need(self.loop_max_scale_change > 0, "loop_max_scale_change", "must be > 0")
+        need(self.sigma_log_scale > 0, "sigma_log_scale", "must be > 0")
         return self
 
     def __post_init__(self):

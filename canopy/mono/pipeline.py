@@ -27,6 +27,8 @@ class MonoRunResult:
     n_initialisations: int
     tracking_timings: list[dict[str, float]] = field(default_factory=list)
     mapping_timings: list[dict[str, float]] = field(default_factory=list)
+    closures: list = field(default_factory=list)          # canopy.loop.LoopClosure, with loops on
+    detection: dict = field(default_factory=dict)         # the loop detector's counts
 
     @property
     def tracked_mask(self) -> np.ndarray:
@@ -34,8 +36,12 @@ class MonoRunResult:
 
 
 def run_mono_sequential(source, tracking_params: TrackingParams | None = None, mono_params: MonoParams | None = None,
-                        max_frames: int | None = None, fast=None) -> MonoRunResult:
-    """``fast``: optional callable image -> (threshold, fallback, min_keypoints) (AFE Eq. 18-19)."""
+                        max_frames: int | None = None, fast=None, vocabulary=None, loop_params=None,
+                        on_closure=None) -> MonoRunResult:
+    """``fast``: optional callable image -> (threshold, fallback, min_keypoints) (AFE Eq. 18-19).
+    ``vocabulary``: with one (and ``mono_params.loop_enabled``), loops are closed in Sim(3)
+    after every keyframe (``canopy.loop.mono.MonoLoopCloser``), the map corrected and the loop's
+    two sides fused before the local-map update goes back to tracking."""
     tracking_params = tracking_params or TrackingParams()
     mono_params = mono_params or MonoParams()
     calib = source.calibration
@@ -45,6 +51,11 @@ def run_mono_sequential(source, tracking_params: TrackingParams | None = None, m
     stamps, statuses, refs, rel, track_poses, kf_indices = [], [], [], [], [], []
     track_t, map_t = [], []
     first_init = None
+    closer = None
+    if vocabulary is not None and mono_params.loop_enabled:
+        from canopy.loop.mono import MonoLoopCloser
+
+        closer = MonoLoopCloser(calib, loop_params, vocabulary, mono_params)
     for i in range(n):
         frame = source.frame(i)
         if fast is not None:
@@ -60,6 +71,8 @@ def run_mono_sequential(source, tracking_params: TrackingParams | None = None, m
             kf_indices.append(kf.index)
             update = mapper.insert_keyframe(kf)
             map_t.append(update.timings)
+            if closer is not None:
+                update = _close_loops(closer, kf, mapper, update, vocabulary, on_closure)
             tracker.apply_map_update(update)
         if res.keyframes and first_init is None and res.keyframe_reason == "initialisation":
             first_init = frame.index
@@ -73,5 +86,30 @@ def run_mono_sequential(source, tracking_params: TrackingParams | None = None, m
         if s == STATUS_LOST and i > 0:
             poses[i] = poses[i - 1]
     traj = Trajectory(np.asarray(stamps), np.asarray(poses).reshape(-1, 4, 4), meta={"statuses": statuses})
+    detection = {}
+    if closer is not None:
+        d = closer.detector.stats
+        detection = {"keyframes": d.keyframes, "queries": d.queries, "candidates": d.candidates,
+                     "consistent": d.consistent, "verified": d.verified, "rejected": dict(d.rejected)}
     return MonoRunResult(traj, mapper.keyframe_trajectory(), mapper.map_points(), statuses, kf_indices, first_init,
-                         tracker.n_initialisations, track_t, map_t)
+                         tracker.n_initialisations, track_t, map_t, closer.closures if closer is not None else [],
+                         detection)
+
+
+def _close_loops(closer, kf, mapper, update, vocabulary, on_closure):
+    """The loop closer's step for one inserted keyframe; on a loop the map is corrected in
+    Sim(3), the loop's two sides are fused, and ``update`` is re-read from the corrected map."""
+    from canopy.loop.correction import refresh_update
+    from canopy.loop.keyframe import with_bow
+    from canopy.loop.mono import apply_sim3_correction, place_keyframe_from_mono_map
+
+    place = with_bow(place_keyframe_from_mono_map(kf, mapper), vocabulary)
+    closure = closer.add_keyframe(place, update.keyframe_poses)
+    if closure is None:
+        return update
+    apply_sim3_correction(mapper, closure.corrections)
+    mapper.fuse_loop(closure.constraint.query, closure.constraint.candidate)
+    refresh_update(mapper, update)
+    if on_closure is not None:
+        on_closure(closure)
+    return update
