@@ -33,7 +33,8 @@ class LocalMappingActor(Actor):
     name = "local_mapping"
 
     def setup(self, ctx: ActorContext) -> None:
-        if self.config.get("sensor", "stereo") == "mono":
+        self.mono = self.config.get("sensor", "stereo") == "mono"
+        if self.mono:
             from canopy.mono import MonoMapper
             self.mapper = MonoMapper(self.config["calib"], self.config.get("mono"),
                                      pixel_sigma=float(self.config.get("pixel_sigma", 1.0)))
@@ -54,10 +55,17 @@ class LocalMappingActor(Actor):
             if msg.loop_epoch < self.loop_epoch:  # tracked before the latest correction reached tracking
                 msg.T_world_cam = catch_up_pose(msg.index, msg.T_world_cam, self.epoch_corrections,
                                                 msg.loop_epoch, self.loop_epoch)
+                if self.mono:  # the corrections are similarities: keep the pose rigid
+                    from canopy.loop.sim3 import rigid_pose
+                    msg.T_world_cam = rigid_pose(msg.T_world_cam)
             update = self.mapper.insert_keyframe(msg)
             self.n_keyframes += 1
             if self.loop_on:
-                ctx.send("loop_closing", loop_keyframe_message(msg, self.mapper, update))
+                if self.mono:
+                    from canopy.loop.mono import mono_loop_keyframe_message
+                    ctx.send("loop_closing", mono_loop_keyframe_message(msg, self.mapper, update))
+                else:
+                    ctx.send("loop_closing", loop_keyframe_message(msg, self.mapper, update))
             self.last_update = update
             update.loop_epoch = self.loop_epoch
             # Tracking may already have finished at the end of a realtime run: never block on it.
@@ -76,7 +84,11 @@ class LocalMappingActor(Actor):
             ctx.stop()
 
     def _on_loop_result(self, result: LoopResult, update) -> bool:
-        changed = apply_loop_result(self.mapper, result, update)
+        if self.mono:
+            from canopy.loop.mono import apply_mono_loop_result
+            changed = apply_mono_loop_result(self.mapper, result, update)
+        else:
+            changed = apply_loop_result(self.mapper, result, update)
         self.loops = max(self.loops, int(result.loops))
         if changed:
             self.loop_epoch += 1

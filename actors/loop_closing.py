@@ -35,7 +35,11 @@ class LoopClosingActor(Actor):
     def setup(self, ctx: ActorContext) -> None:
         params = self.config["params"]
         self.vocabulary = load_vocabulary(params.vocabulary)
-        self.closer = LoopCloser(self.config["calib"], params, self.vocabulary)
+        if self.config.get("sensor", "stereo") == "mono":  # Sim(3) verification and pose graph
+            from canopy.loop.mono import MonoLoopCloser
+            self.closer = MonoLoopCloser(self.config["calib"], params, self.vocabulary, self.config.get("mono"))
+        else:
+            self.closer = LoopCloser(self.config["calib"], params, self.vocabulary)
         ctx.extra.update({"loops": 0, "vocabulary": getattr(self.vocabulary, "name", "")})
 
     def on_message(self, msg, ctx: ActorContext) -> None:

@@ -66,7 +66,9 @@ def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_fra
     ep = {name: Supervisor.endpoints(run_dir, name)
           for name in ("source", "enhancement", "tracking", "local_mapping", "loop_closing", "recorder")}
     to_recorder = ["recorder"] if record else []
-    loop_on = cfg.loop is not None and cfg.loop.enabled and cfg.runtime.sensor != "mono"  # the loop closer is stereo (SE(3))
+    # mono closes loops in Sim(3) (canopy.loop.mono) unless mono.loop_enabled is off
+    loop_on = (cfg.loop is not None and cfg.loop.enabled
+               and (cfg.runtime.sensor != "mono" or cfg.mono is None or cfg.mono.loop_enabled))
     to_loop = ["loop_closing"] if loop_on else []
     events = f"ipc://{run_dir}/supervisor.events"
     rt = cfg.runtime
@@ -96,7 +98,8 @@ def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_fra
               "vocabulary_id": Path(cfg.loop.vocabulary).name if loop_on and cfg.loop.vocabulary else
               ("default" if loop_on else "")},
              ["tracking", *to_recorder, *to_loop]),
-    ] + ([spec("loop_closing", "actors.loop_closing:LoopClosingActor", {"calib": calib, "params": cfg.loop},
+    ] + ([spec("loop_closing", "actors.loop_closing:LoopClosingActor",
+               {"calib": calib, "params": cfg.loop, "sensor": rt.sensor, "mono": cfg.mono},
                ["local_mapping"])] if loop_on else []) + ([spec("recorder", "actors.recorder:RecorderActor",
                {"path": record, "ring": rings["enhanced"], "image_every": 1, "end_of_streams": 2}, [])]
          if record else [])

@@ -28,6 +28,12 @@ def test_kitti_mono_run_initialises_and_reports_sim3(tmp_path):
     # initialisation sit at the start pose, so the error bound is loose here
     assert sim3["scale"] > 5.0 and sim3["rmse"] < 1.0
     assert (out / "keyframes.tum").is_file() and (out / "map_points.ply").is_file()
+    # the loop closer runs in mono too (Sim(3), canopy.loop.mono): it saw every keyframe, closed no loop
+    stats = json.loads((out / "stats.json").read_text())
+    n_map_keyframes = sum(1 for ln in (out / "keyframes.tum").read_text().splitlines() if ln and not ln.startswith("#"))
+    # (the map's keyframes: the initialisation's reference frame is one, though its frame is 'not_initialised')
+    assert stats["loop_closing"]["extra"]["keyframes"] == n_map_keyframes
+    assert metrics["loops"]["closed"] == 0
 
 
 def test_unknown_sensor_in_config_is_a_clear_error(tmp_path):

@@ -196,3 +196,34 @@ def relocalise_mono(frame: PlaceKeyframe, detector: LoopDetector, keyframe_poses
         if v.constraint is not None and v.n_inliers >= params.reloc_min_inliers:
             return keyframe_poses[c.keyframe] @ v.constraint.T_cand_query, c.keyframe, v.n_inliers
     return None
+
+
+# --------------------------------------------------------------------------- actor hooks
+
+def mono_loop_keyframe_message(kf, mapper, update):
+    """Local mapping -> loop closing for a monocular keyframe: as ``loop_keyframe_message``,
+    with the depth of each keypoint's map point in ``depth`` (``place_keyframe_from_mono_map``)."""
+    from protocol.messages import LoopKeyframe
+
+    place = place_keyframe_from_mono_map(kf, mapper)
+    return LoopKeyframe(index=place.index, timestamp=place.timestamp, T_world_cam=place.T_world_cam,
+                        uv=np.asarray(place.uv, np.float32), u_right=np.asarray(place.u_right, np.float32),
+                        depth=np.asarray(place.depth, np.float32), octave=np.asarray(place.octave, np.int32),
+                        descriptors=place.descriptors, landmark_ids=place.landmark_ids,
+                        window_poses={int(k): np.asarray(T, float) for k, T in update.keyframe_poses.items()},
+                        sent_at=time.time())
+
+
+def apply_mono_loop_result(mapper, result, update) -> bool:
+    """``apply_loop_result`` for a monocular map: similarities applied (``apply_sim3_correction``),
+    the loop's two sides fused, ``update`` re-read from the corrected map."""
+    from canopy.loop.correction import corrections_from_arrays, refresh_update
+
+    if not result.closed or len(result.keyframe_ids) == 0:
+        return False
+    apply_sim3_correction(mapper, corrections_from_arrays(result.keyframe_ids, result.corrections))
+    if result.candidate is not None and int(result.candidate) >= 0:
+        mapper.fuse_loop(int(result.keyframe_index), int(result.candidate))
+    if update is not None:
+        refresh_update(mapper, update)
+    return True
