@@ -12,12 +12,14 @@ import pytest
 from canopy.frontend.geometry import rotation_angle, se3_inv, so3_exp
 from canopy.loop import LoopParams, describe_stereo_pair, with_bow
 from canopy.loop.detector import LoopDetector
-from canopy.loop.mono import (MonoLoopConstraint, apply_sim3_correction, relocalise_mono, verify_candidate_mono)
+from canopy.loop.mono import (MonoLoopCloser, MonoLoopConstraint, apply_sim3_correction, relocalise_mono,
+                              verify_candidate_mono)
 from canopy.loop.pose_graph import LOOP, PoseGraphEdge, essential_graph_edges
 from canopy.loop.sim3 import (estimate_sim3_ransac, from_gtsam, optimise_sim3_pose_graph, rigid_pose, sim3_inv,
                               sim3_matrix, sim3_parts, to_gtsam)
 from canopy.metrics import ate_sim3
 from canopy.mono import MonoParams
+from shared.types import StereoCalibration
 
 K = np.array([[400.0, 0, 320], [0, 400.0, 240], [0, 0, 1]])
 
@@ -90,6 +92,14 @@ def test_sim3_pose_graph_removes_scale_drift_around_a_loop():
     assert before_err > 0.3 and after_err < 0.02
     assert np.linalg.norm(after[-1][:3, 3] - truth[-1][:3, 3]) < 0.01
     assert res.final_error < 0.1 * res.initial_error
+    # the monocular loop closer's own step (its default sigmas): rigid poses out, similarity corrections
+    closer = MonoLoopCloser(StereoCalibration(400.0, 400.0, 320.0, 240.0, 0.1, 640, 480))
+    poses_after, corrections, (e0, e1) = closer.optimise(poses, edges, fixed=0)
+    assert ate_sim3(np.array([poses_after[k] for k in range(n)]), np.array(truth))["rmse"] < 0.05 and e1 < 0.1 * e0
+    assert all(np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3)) for T in poses_after.values())
+    # the query's map is shrunk back to the candidate's units: its correction carries the loop scale
+    assert sim3_parts(corrections[n - 1])[2] == pytest.approx(s_loop, rel=0.02)
+    assert sim3_parts(corrections[0])[2] == pytest.approx(1.0, abs=1e-6)
 
 
 def test_sim3_correction_moves_and_scales_landmarks_with_their_keyframe():

@@ -79,15 +79,24 @@ class LoopCloser:
         if constraint is None:
             return None
         t1 = time.perf_counter()
-        self.loop_edges.append(PoseGraphEdge(constraint.candidate, constraint.query, constraint.T_cand_query, LOOP))
+        self.loop_edges.append(PoseGraphEdge(constraint.candidate, constraint.query, self.loop_measurement(constraint),
+                                             LOOP))
         before = {k: T.copy() for k, T in self.poses.items()}
         order = sorted(before)
         edges = essential_graph_edges(order, before, self.detector.covisibility.pairs(), self.loop_edges,
                                       self.params.essential_min_shared)
-        result = optimise_pose_graph(before, edges, self.params, fixed=order[0])
-        self.poses = {k: T.copy() for k, T in result.poses.items()}
-        closure = LoopClosure(constraint, pose_corrections(before, result.poses), before, result.poses,
-                              (result.initial_error, result.final_error),
+        after, corrections, errors = self.optimise(before, edges, fixed=order[0])
+        self.poses = {k: T.copy() for k, T in after.items()}
+        closure = LoopClosure(constraint, corrections, before, after, errors,
                               {"detect": t_detect, "pose_graph": (time.perf_counter() - t1) * 1e3})
         self.closures.append(closure)
         return closure
+
+    def loop_measurement(self, constraint: LoopConstraint) -> np.ndarray:
+        """The loop edge's measurement: the verified rigid pose (the monocular closer: a similarity)."""
+        return constraint.T_cand_query
+
+    def optimise(self, before: dict[int, np.ndarray], edges: list[PoseGraphEdge], fixed: int):
+        """SE(3) pose graph: (poses after, per-keyframe corrections, (error before, after))."""
+        result = optimise_pose_graph(before, edges, self.params, fixed=fixed)
+        return result.poses, pose_corrections(before, result.poses), (result.initial_error, result.final_error)

@@ -25,13 +25,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from canopy.frontend.geometry import rotation_angle
-from canopy.loop.closer import LoopCloser, LoopClosure
+from canopy.loop.closer import LoopCloser
 from canopy.loop.correction import _apply
 from canopy.loop.database import FeatureStats
 from canopy.loop.detector import LoopDetector
 from canopy.loop.keyframe import PlaceKeyframe
 from canopy.loop.params import LoopParams
-from canopy.loop.pose_graph import COVISIBILITY, LOOP, ODOMETRY, PoseGraphEdge, correction_for, essential_graph_edges
+from canopy.loop.pose_graph import COVISIBILITY, LOOP, ODOMETRY, PoseGraphEdge, correction_for
 from canopy.loop.sim3 import (estimate_sim3_ransac, optimise_sim3_pose_graph, rigid_pose, sim3_corrections,
                               sim3_matrix, sim3_parts)
 from canopy.loop.verify import LoopConstraint, Verification, verify_candidate
@@ -114,31 +114,16 @@ class MonoLoopCloser(LoopCloser):
                 COVISIBILITY: (p.odometry_sigma_rot, p.odometry_sigma_trans, ss),
                 LOOP: (p.loop_sigma_rot, p.loop_sigma_trans, ss)}
 
-    def add_keyframe(self, kf: PlaceKeyframe, window_poses: dict[int, np.ndarray] | None = None) -> LoopClosure | None:
-        t0 = time.perf_counter()
-        for k, T in (window_poses or {}).items():
-            if k in self.poses:
-                self.poses[int(k)] = np.asarray(T, float)
-        self.poses[kf.index] = np.asarray(kf.T_world_cam, float)
-        constraint = self.detector.add_keyframe(kf)
-        t_detect = (time.perf_counter() - t0) * 1e3
-        if constraint is None:
-            return None
-        t1 = time.perf_counter()
-        self.loop_edges.append(PoseGraphEdge(constraint.candidate, constraint.query, constraint.S_cand_query, LOOP))
-        before = {k: T.copy() for k, T in self.poses.items()}
-        order = sorted(before)
-        edges = essential_graph_edges(order, before, self.detector.covisibility.pairs(), self.loop_edges,
-                                      self.params.essential_min_shared)
+    def loop_measurement(self, constraint: MonoLoopConstraint) -> np.ndarray:
+        return constraint.S_cand_query
+
+    def optimise(self, before: dict[int, np.ndarray], edges: list[PoseGraphEdge], fixed: int):
+        """Sim(3) pose graph; the keyframes keep rigid poses, the corrections are similarities."""
         p = self.params
         result = optimise_sim3_pose_graph(before, edges, self.graph_sigmas(), p.robust_kernel_k, p.pgo_max_iterations,
-                                          fixed=order[0])
-        self.poses = {k: rigid_pose(S) for k, S in result.poses.items()}
-        closure = LoopClosure(constraint, sim3_corrections(before, result.poses), before, dict(self.poses),
-                              (result.initial_error, result.final_error),
-                              {"detect": t_detect, "pose_graph": (time.perf_counter() - t1) * 1e3})
-        self.closures.append(closure)
-        return closure
+                                          fixed=fixed)
+        after = {k: rigid_pose(S) for k, S in result.poses.items()}
+        return after, sim3_corrections(before, result.poses), (result.initial_error, result.final_error)
 
 
 # --------------------------------------------------------------------------- the map side
