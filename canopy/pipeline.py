@@ -46,6 +46,20 @@ class SequentialResult:
         return out
 
 
+def frame_poses(kf_final: dict[int, np.ndarray], refs: list[int], rel: list, track_poses: list,
+                statuses: list[str]) -> list[np.ndarray]:
+    """Each frame's pose re-expressed with the final keyframe poses (``kf_final[ref] @ T_ref_cam``,
+    the pose tracking had where its reference keyframe is gone or it had none); lost frames
+    carry the last good pose forward (after correction). Shared by the stereo and monocular
+    lockstep pipelines."""
+    poses = [kf_final[ref] @ T_rel if T_rel is not None and ref in kf_final else track_poses[i]
+             for i, (T_rel, ref) in enumerate(zip(rel, refs))]
+    for i, s in enumerate(statuses):
+        if s == STATUS_LOST and i > 0:
+            poses[i] = poses[i - 1]
+    return poses
+
+
 def run_sequential(source, tracking_params: TrackingParams | None = None,
                    mapping_params: MappingParams | None = None, max_frames: int | None = None,
                    initial_pose: np.ndarray | None = None) -> SequentialResult:
@@ -73,17 +87,7 @@ def run_sequential(source, tracking_params: TrackingParams | None = None,
             tracker.apply_map_update(update)
         refs.append(res.reference_kf_index)
         rel.append(None if res.T_ref_cam is None else res.T_ref_cam.copy())
-    kf_final = mapper.keyframe_poses()
-    poses = []
-    for i, (T_rel, ref) in enumerate(zip(rel, refs)):
-        if T_rel is not None and ref in kf_final:
-            poses.append(kf_final[ref] @ T_rel)
-        else:
-            poses.append(track_poses[i])
-    # lost frames carry the last good pose forward (after correction)
-    for i, s in enumerate(statuses):
-        if s == STATUS_LOST and i > 0:
-            poses[i] = poses[i - 1]
+    poses = frame_poses(mapper.keyframe_poses(), refs, rel, track_poses, statuses)
     traj = Trajectory(np.asarray(stamps), np.asarray(poses).reshape(-1, 4, 4), meta={"statuses": statuses})
     return SequentialResult(traj, mapper.keyframe_trajectory(), mapper.map_points(), statuses, kf_indices,
                             track_t, map_t, tracker.n_lost, map_lines=mapper.map_lines())

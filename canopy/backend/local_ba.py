@@ -38,21 +38,11 @@ class LocalBundleAdjustmentMixin:
         """Minimise AGRI Eq. 11 (point terms, Eq. 9) over the local keyframes and their landmarks."""
         p = self.params
         kf_set = set(local) | set(fixed)
-        lm_ids = sorted({lid for k in local for lid in self.keyframes[k].landmark[self.keyframes[k].landmark >= 0].tolist()})
+        # edges: (kf, landmark, keypoint)
+        lm_ids, e_kf, e_lm, e_kp = self._observation_edges(local, kf_set)
         lines = self._line_edges(local, kf_set) if p.use_lines else None
         if not lm_ids and (lines is None or len(lines[0]) == 0):
             return
-        # edges: (kf, landmark, keypoint)
-        e_kf, e_lm, e_kp = [], [], []
-        for lid in lm_ids:
-            for k, i in self.landmarks[lid].obs.items():
-                if k in kf_set:
-                    e_kf.append(k)
-                    e_lm.append(lid)
-                    e_kp.append(i)
-        e_kf = np.asarray(e_kf)
-        e_lm = np.asarray(e_lm)
-        e_kp = np.asarray(e_kp)
         uv = np.empty((len(e_kf), 2))
         ur = np.empty(len(e_kf))
         octv = np.empty(len(e_kf), np.int64)
@@ -253,17 +243,4 @@ class LocalBundleAdjustmentMixin:
         chi2 = err / (self.params.pixel_sigma * scale ** octv) ** 2
         chi2[~(z > self.params.min_depth)] = np.inf
         return chi2
-
-    def _remove_observation(self, lid: int, k: int) -> None:
-        lm = self.landmarks.get(lid)
-        if lm is None or k not in lm.obs:
-            return
-        i = lm.obs.pop(k)
-        self.keyframes[k].landmark[i] = -1
-
-    def _delete_landmark(self, lid: int) -> None:
-        lm = self.landmarks.pop(lid)
-        for k, i in lm.obs.items():
-            self.keyframes[k].landmark[i] = -1
-        self.n_culled += 1
 

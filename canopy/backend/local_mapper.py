@@ -21,13 +21,13 @@ import gtsam
 import numpy as np
 
 from canopy.backend.local_ba import LocalBundleAdjustmentMixin
-from canopy.backend.map_store import Keyframe, Landmark, LineLandmark, local_map_update
+from canopy.backend.map_store import Keyframe, Landmark, LineLandmark, MapStoreAccess, local_map_update
 from canopy.backend.params import MappingParams
 from canopy.frontend.matching import as_words, _popcount64
 from canopy.frontend.messages import KeyframeData, LocalMapUpdate
 from canopy.lines import line_coefficients
 from canopy.lines.geometry import extend_segment
-from shared.types import StereoCalibration, Trajectory
+from shared.types import StereoCalibration
 
 __all__ = ["Keyframe", "Landmark", "LineLandmark", "LocalMapper"]
 
@@ -36,7 +36,7 @@ def _ms(t0: float) -> float:
     return (time.perf_counter() - t0) * 1e3
 
 
-class LocalMapper(LocalBundleAdjustmentMixin):
+class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
     def __init__(self, calib: StereoCalibration, params: MappingParams | None = None):
         self.calib = calib
         self.params = (params or MappingParams()).validate()
@@ -78,20 +78,6 @@ class LocalMapper(LocalBundleAdjustmentMixin):
         self.timings.append(timings)
         return update
 
-    def keyframe_trajectory(self) -> Trajectory:
-        idx = sorted(self.keyframes)
-        stamps = [self.keyframes[i].timestamp for i in idx]
-        poses = [self.keyframes[i].T_world_cam for i in idx] if idx else np.zeros((0, 4, 4))
-        return Trajectory(np.asarray(stamps, float), np.asarray(poses, float), meta={"indices": idx})
-
-    def keyframe_poses(self) -> dict[int, np.ndarray]:
-        return {i: k.T_world_cam.copy() for i, k in self.keyframes.items()}
-
-    def map_points(self) -> np.ndarray:
-        if not self.landmarks:
-            return np.zeros((0, 3))
-        return np.array([lm.position for lm in self.landmarks.values()], float)
-
     def map_lines(self) -> np.ndarray:
         """(L,2,3) endpoints A, B (world) of every line landmark, in id order."""
         if not self.lines:
@@ -110,12 +96,7 @@ class LocalMapper(LocalBundleAdjustmentMixin):
                        np.full(n, -1, np.int64), self._segment, self._order)
         self._order += 1
         self.keyframes[kf.index] = rec
-        # ORB-SLAM's found/visible statistics collected by tracking since the last keyframe
-        for lid, vis, fnd in zip(kf.seen_ids.tolist(), kf.seen_visible.tolist(), kf.seen_found.tolist()):
-            lm = self.landmarks.get(lid)
-            if lm is not None:
-                lm.visible += vis
-                lm.found += fnd
+        self._add_seen_counts(kf)   # ORB-SLAM's found/visible statistics collected by tracking
         # observations of existing landmarks
         touched = []
         for i in np.flatnonzero(kf.landmark_ids >= 0).tolist():

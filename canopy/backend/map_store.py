@@ -68,3 +68,65 @@ def local_map_update(index: int, keyframes: dict, landmarks: dict, local: list[i
     desc = np.array([landmarks[i].descriptor for i in ids], np.uint8).reshape(-1, 32)
     poses = {k: keyframes[k].T_world_cam.copy() for k in local}
     return LocalMapUpdate(index, np.asarray(ids, np.int64), pos, desc, poses)
+
+
+class MapStoreAccess:
+    """What both mappers (stereo ``LocalMapper``, monocular ``MonoMapper``) answer from their
+    ``keyframes`` / ``landmarks`` stores, written once."""
+
+    keyframes: dict
+    landmarks: dict
+
+    def keyframe_trajectory(self):
+        from shared.types import Trajectory
+
+        idx = sorted(self.keyframes)
+        stamps = [self.keyframes[i].timestamp for i in idx]
+        poses = [self.keyframes[i].T_world_cam for i in idx] if idx else np.zeros((0, 4, 4))
+        return Trajectory(np.asarray(stamps, float), np.asarray(poses, float), meta={"indices": idx})
+
+    def keyframe_poses(self) -> dict[int, np.ndarray]:
+        return {i: k.T_world_cam.copy() for i, k in self.keyframes.items()}
+
+    def map_points(self) -> np.ndarray:
+        if not self.landmarks:
+            return np.zeros((0, 3))
+        return np.array([lm.position for lm in self.landmarks.values()], float)
+
+    def _add_seen_counts(self, kf) -> None:
+        """ORB-SLAM's found / visible statistics tracking collected since the last keyframe
+        (``KeyframeData.seen_*``) added to the landmarks still in the map."""
+        for lid, vis, fnd in zip(kf.seen_ids.tolist(), kf.seen_visible.tolist(), kf.seen_found.tolist()):
+            lm = self.landmarks.get(lid)
+            if lm is not None:
+                lm.visible += vis
+                lm.found += fnd
+
+    def _observation_edges(self, local: list[int], kf_set: set[int]):
+        """Local BA's point edges: the landmarks the ``local`` keyframes observe (sorted ids) and
+        every observation of them by a keyframe of ``kf_set``, as arrays (keyframe, landmark,
+        keypoint row). Returns (lm_ids, e_kf, e_lm, e_kp)."""
+        lm_ids = sorted({lid for k in local for lid in self.keyframes[k].landmark[self.keyframes[k].landmark >= 0].tolist()})
+        e_kf, e_lm, e_kp = [], [], []
+        for lid in lm_ids:
+            for k, i in self.landmarks[lid].obs.items():
+                if k in kf_set:
+                    e_kf.append(k)
+                    e_lm.append(lid)
+                    e_kp.append(i)
+        return lm_ids, np.asarray(e_kf, np.int64), np.asarray(e_lm, np.int64), np.asarray(e_kp, np.int64)
+
+    def _delete_landmark(self, lid: int) -> None:
+        """Cull landmark ``lid``: out of the store and out of every keyframe that observed it."""
+        lm = self.landmarks.pop(lid)
+        for k, i in lm.obs.items():
+            self.keyframes[k].landmark[i] = -1
+        self.n_culled += 1
+
+    def _remove_observation(self, lid: int, k: int) -> None:
+        """Drop keyframe ``k``'s observation of landmark ``lid`` (both indices kept in step)."""
+        lm = self.landmarks.get(lid)
+        if lm is None or k not in lm.obs:
+            return
+        i = lm.obs.pop(k)
+        self.keyframes[k].landmark[i] = -1

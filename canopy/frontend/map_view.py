@@ -42,3 +42,16 @@ def merge_views(base: MapView, provisional: dict[int, tuple[np.ndarray, np.ndarr
     first = np.sort(first)
     out.set(ids[first], pos[first], desc[first])
     return out
+
+
+def seen_counts(seen: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """ORB-SLAM's visible / found counters of the frames since the last keyframe: ``seen`` holds,
+    per tracked frame, the ids of the local-map landmarks in view and whether each was matched
+    (1.0) or not; returns (unique ids, times visible, times found) for ``KeyframeData.seen_*``."""
+    if not seen:
+        return np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros(0, np.int32)
+    ids = np.concatenate([s[0] for s in seen])
+    found = np.concatenate([s[1] for s in seen])
+    uids, inv = np.unique(ids, return_inverse=True)
+    return (uids, np.bincount(inv, minlength=len(uids)).astype(np.int32),
+            np.bincount(inv, weights=found, minlength=len(uids)).astype(np.int32))

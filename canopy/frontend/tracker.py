@@ -28,7 +28,7 @@ from canopy.frontend.keyframe_policy import entropy_ratio, keyframe_reasons
 from canopy.frontend.geometry import (differential_entropy, pose_information, se3_inv, stereo_pose_jacobian,
                                       transform)
 from canopy.frontend.map_tracking import MapTrackingMixin
-from canopy.frontend.map_view import MapView, merge_views
+from canopy.frontend.map_view import MapView, merge_views, seen_counts
 from canopy.frontend.matching import as_words
 from canopy.frontend.messages import KeyframeData, LocalMapUpdate, TrackingResult
 from canopy.frontend.params import TrackingParams
@@ -292,15 +292,7 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin):
         pos = self._stereo_points_world(feats, stereo, T_wc, idx)
         self._provisional[frame.index] = (new_ids[idx], pos, feats.descriptors[idx])
         self._view_dirty = True
-        if self._seen:
-            ids = np.concatenate([s[0] for s in self._seen])
-            found = np.concatenate([s[1] for s in self._seen])
-            uids, inv = np.unique(ids, return_inverse=True)
-            seen_visible = np.bincount(inv, minlength=len(uids)).astype(np.int32)
-            seen_found = np.bincount(inv, weights=found, minlength=len(uids)).astype(np.int32)
-        else:
-            uids = np.zeros(0, np.int64)
-            seen_visible = seen_found = np.zeros(0, np.int32)
+        uids, seen_visible, seen_found = seen_counts(self._seen)
         self._seen = []
         line_fields = {} if lines is None else self._keyframe_lines(frame, lines, line_matched, T_wc)
         kf = KeyframeData(

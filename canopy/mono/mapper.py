@@ -18,11 +18,11 @@ import numpy as np
 
 from canopy.frontend.geometry import se3_inv
 from canopy.frontend.matching import as_words, match_in_window
-from canopy.backend.map_store import local_map_update
+from canopy.backend.map_store import MapStoreAccess, local_map_update
 from canopy.frontend.messages import KeyframeData, LocalMapUpdate
 from canopy.mono.params import MonoParams
 from canopy.mono.triangulation import new_points_between
-from shared.types import StereoCalibration, Trajectory
+from shared.types import StereoCalibration
 
 X = gtsam.symbol_shorthand.X
 L = gtsam.symbol_shorthand.L
@@ -61,7 +61,7 @@ class MonoLandmark:
     found: int = 1
 
 
-class MonoMapper:
+class MonoMapper(MapStoreAccess):
     def __init__(self, calib: StereoCalibration, params: MonoParams | None = None, pixel_sigma: float = 1.0):
         self.calib = calib
         self.params = (params or MonoParams()).validate()
@@ -115,20 +115,6 @@ class MonoMapper:
         self.timings.append(timings)
         return update
 
-    def keyframe_trajectory(self) -> Trajectory:
-        idx = sorted(self.keyframes)
-        poses = [self.keyframes[i].T_world_cam for i in idx] if idx else np.zeros((0, 4, 4))
-        return Trajectory(np.asarray([self.keyframes[i].timestamp for i in idx], float), np.asarray(poses, float),
-                          meta={"indices": idx})
-
-    def keyframe_poses(self) -> dict[int, np.ndarray]:
-        return {i: k.T_world_cam.copy() for i, k in self.keyframes.items()}
-
-    def map_points(self) -> np.ndarray:
-        if not self.landmarks:
-            return np.zeros((0, 3))
-        return np.array([lm.position for lm in self.landmarks.values()], float)
-
     def map_lines(self) -> np.ndarray:
         return np.zeros((0, 2, 3))   # the monocular map has points only
 
@@ -159,11 +145,7 @@ class MonoMapper:
                            np.asarray(kf.descriptors, np.uint8), np.full(n, -1, np.int64), self._segment, self._order)
         self._order += 1
         self.keyframes[kf.index] = rec
-        for lid, vis, fnd in zip(kf.seen_ids.tolist(), kf.seen_visible.tolist(), kf.seen_found.tolist()):
-            lm = self.landmarks.get(lid)
-            if lm is not None:
-                lm.visible += vis
-                lm.found += fnd
+        self._add_seen_counts(kf)
         for i in np.flatnonzero(kf.landmark_ids >= 0).tolist():
             lm = self.landmarks.get(int(kf.landmark_ids[i]))
             if lm is None or lm.segment != self._segment or kf.index in lm.obs:
@@ -317,15 +299,7 @@ class MonoMapper:
         return m
 
     def _edges(self, local: list[int], kf_set: set[int]):
-        lm_ids = sorted({lid for k in local for lid in self.keyframes[k].landmark[self.keyframes[k].landmark >= 0].tolist()})
-        e_kf, e_lm, e_kp = [], [], []
-        for lid in lm_ids:
-            for k, i in self.landmarks[lid].obs.items():
-                if k in kf_set:
-                    e_kf.append(k)
-                    e_lm.append(lid)
-                    e_kp.append(i)
-        e_kf, e_lm, e_kp = np.asarray(e_kf, np.int64), np.asarray(e_lm, np.int64), np.asarray(e_kp, np.int64)
+        lm_ids, e_kf, e_lm, e_kp = self._observation_edges(local, kf_set)
         uv = np.empty((len(e_kf), 2))
         octv = np.empty(len(e_kf), np.int64)
         for k in np.unique(e_kf).tolist():
@@ -388,13 +362,6 @@ class MonoMapper:
         for j in np.flatnonzero(bad).tolist():
             self._remove_observation(int(e_lm[j]), int(e_kf[j]))
 
-    def _remove_observation(self, lid: int, k: int) -> None:
-        lm = self.landmarks.get(lid)
-        if lm is None or k not in lm.obs:
-            return
-        i = lm.obs.pop(k)
-        self.keyframes[k].landmark[i] = -1
-
     # ----------------------------------------------------------------- culling
     def _cull(self, rec: MonoKeyframe) -> None:
         """ORB-SLAM MapPointCulling (monocular: a recent point must be seen by more than two
@@ -416,10 +383,7 @@ class MonoMapper:
             elif age >= p.cull_age_keyframes + 1:
                 lm.recent = False
         for lid in bad:
-            lm = self.landmarks.pop(lid)
-            for k, i in lm.obs.items():
-                self.keyframes[k].landmark[i] = -1
-            self.n_culled += 1
+            self._delete_landmark(lid)
 
     # ----------------------------------------------------------------- update for tracking
     def _make_update(self, rec: MonoKeyframe, local: list[int], fixed: list[int]) -> LocalMapUpdate:

@@ -11,6 +11,7 @@ import numpy as np
 
 from canopy.frontend import TrackingParams
 from canopy.mono.mapper import MonoMapper
+from canopy.pipeline import frame_poses
 from canopy.mono.params import MonoParams
 from canopy.mono.tracker import STATUS_INIT, STATUS_LOST, MonoTracker
 from shared.types import Trajectory
@@ -78,13 +79,7 @@ def run_mono_sequential(source, tracking_params: TrackingParams | None = None, m
             first_init = frame.index
         refs.append(res.reference_kf_index)
         rel.append(None if res.T_ref_cam is None else res.T_ref_cam.copy())
-    kf_final = mapper.keyframe_poses()
-    poses = []
-    for i, (T_rel, ref) in enumerate(zip(rel, refs)):
-        poses.append(kf_final[ref] @ T_rel if T_rel is not None and ref in kf_final else track_poses[i])
-    for i, s in enumerate(statuses):
-        if s == STATUS_LOST and i > 0:
-            poses[i] = poses[i - 1]
+    poses = frame_poses(mapper.keyframe_poses(), refs, rel, track_poses, statuses)
     traj = Trajectory(np.asarray(stamps), np.asarray(poses).reshape(-1, 4, 4), meta={"statuses": statuses})
     detection = {}
     if closer is not None:

@@ -27,6 +27,7 @@ import numpy as np
 
 from canopy.frontend.features import Features, OrbExtractor
 from canopy.frontend.geometry import pose_from_rvec, project_stereo, se3_inv, transform
+from canopy.frontend.map_view import seen_counts
 from canopy.frontend.matching import as_words, knn_match, match_in_window, unique_by_reference
 from canopy.frontend.messages import KeyframeData, LocalMapUpdate, TrackingResult
 from canopy.frontend.params import TrackingParams
@@ -227,14 +228,7 @@ class MonoTracker:
     def _keyframe(self, frame, feats: Features, T_wc, matched_ids, restart=False, depth=None,
                   new_ids=None) -> KeyframeData:
         n = len(feats)
-        if self._seen:
-            ids = np.concatenate([s[0] for s in self._seen])
-            found = np.concatenate([s[1] for s in self._seen])
-            uids, inv = np.unique(ids, return_inverse=True)
-            seen_visible = np.bincount(inv, minlength=len(uids)).astype(np.int32)
-            seen_found = np.bincount(inv, weights=found, minlength=len(uids)).astype(np.int32)
-        else:
-            uids, seen_visible, seen_found = np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros(0, np.int32)
+        uids, seen_visible, seen_found = seen_counts(self._seen)
         self._seen = []
         return KeyframeData(
             index=frame.index, timestamp=frame.timestamp, T_world_cam=T_wc.copy(),
