@@ -185,3 +185,43 @@ def test_mono_relocalisation_by_database_query_and_pnp(day_loop_mono_views):
     # an empty database relocalises nothing
     assert relocalise_mono(lost, LoopDetector(gen.calibration, LoopParams(), voc), {}, gen.calibration,
                            LoopParams()) is None
+
+
+def test_lost_mono_tracker_relocalises_into_the_same_map_on_kitti():
+    """KITTI 06, first 12 frames mapped with the loop closer's database filled; then the
+    tracker is lost with no local map left (as after driving far away) and is shown frame 6
+    again: the database query + PnP put it back on the same map at the pose it had there."""
+    from canopy.config import load_run_config
+    from canopy.loop.keyframe import with_bow
+    from canopy.loop.mono import MonoLoopCloser, make_mono_relocaliser, place_keyframe_from_mono_map
+    from canopy.loop.vocabulary import load_vocabulary
+    from canopy.mono import MonoMapper, MonoTracker
+    from canopy.sources import open_source
+
+    src = open_source("kitti", max_frames=12)
+    voc = load_vocabulary()
+    mono = MonoParams()
+    tracker = MonoTracker(src.calibration, load_run_config("kitti").tracking, mono)
+    mapper = MonoMapper(src.calibration, mono)
+    closer = MonoLoopCloser(src.calibration, LoopParams(), voc, mono)
+    tracker.relocaliser = make_mono_relocaliser(closer, mapper, voc)
+    poses = {}
+    for i in range(len(src)):
+        res = tracker.track(src.frame(i))
+        poses[i] = res.T_world_cam.copy()
+        for kf in res.keyframes:
+            update = mapper.insert_keyframe(kf)
+            closer.add_keyframe(with_bow(place_keyframe_from_mono_map(kf, mapper), voc), update.keyframe_poses)
+            tracker.apply_map_update(update)
+    assert res.status == "ok" and len(closer.detector.database) >= 3
+    # lost, its local map gone: only the database can tell where frame 6 is
+    tracker._view = type(tracker._view)()
+    tracker._last_matched = (np.zeros((0, 3)), tracker._last_matched[1][:0], np.zeros(0, np.int64))
+    tracker._lost_run = 1
+    again = src.frame(6)
+    res = tracker.track(type(again)(100, 100.0, again.left, again.right))
+    assert res.status == "ok" and tracker.n_relocalised == 1
+    step = np.linalg.norm(poses[7][:3, 3] - poses[6][:3, 3])          # one frame of driving, map units
+    # (local BA has refined the map since frame 6 was tracked: a small fraction of a step apart)
+    assert np.linalg.norm(res.T_world_cam[:3, 3] - poses[6][:3, 3]) < 0.25 * step
+    assert np.degrees(rotation_angle(res.T_world_cam[:3, :3].T @ poses[6][:3, :3])) < 0.2

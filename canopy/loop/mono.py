@@ -212,3 +212,28 @@ def apply_mono_loop_result(mapper, result, update) -> bool:
     if update is not None:
         refresh_update(mapper, update)
     return True
+
+
+def make_mono_relocaliser(closer: MonoLoopCloser, mapper, vocabulary, max_candidates: int = 3):
+    """The ``MonoTracker.relocaliser`` of an in-process run: the lost frame's keypoints as a
+    place query (``relocalise_mono`` against the loop closer's database, with the map's
+    current keyframe poses), answered with the local map around the keyframe it matched."""
+    from canopy.loop.keyframe import with_bow
+
+    def relocalise(frame, feats):
+        n = len(feats)
+        if n == 0:
+            return None
+        place = with_bow(PlaceKeyframe(index=int(frame.index), timestamp=float(frame.timestamp), T_world_cam=np.eye(4),
+                                       uv=np.asarray(feats.uv, np.float64), u_right=np.full(n, -1.0),
+                                       depth=np.full(n, -1.0), octave=np.asarray(feats.octave, np.int64),
+                                       descriptors=np.asarray(feats.descriptors, np.uint8),
+                                       landmark_ids=np.full(n, -1, np.int64)), vocabulary)
+        found = relocalise_mono(place, closer.detector, mapper.keyframe_poses(), closer.detector.calib,
+                                closer.params, max_candidates)
+        if found is None:
+            return None
+        T_wc, kf, _ = found
+        return T_wc, kf, mapper.local_map_around(kf)
+
+    return relocalise

@@ -134,6 +134,12 @@ class MonoMapper(MapStoreAccess):
             self._fuse_into(self.keyframes[k], lm_old, self._scale_factor)
         return self.n_fused + sum(len(lm.obs) for lm in self.landmarks.values()) - before
 
+    def local_map_around(self, kf_index: int) -> LocalMapUpdate:
+        """The local map of keyframe ``kf_index`` (it and its best covisible keyframes), for a
+        tracker relocalised against it."""
+        local = [kf_index] + self._neighbours(self.keyframes[kf_index], self.params.window_size - 1)
+        return local_map_update(kf_index, self.keyframes, self.landmarks, local, [])
+
     # ----------------------------------------------------------------- insertion
     def _insert(self, kf: KeyframeData) -> MonoKeyframe:
         if kf.restart or self._segment < 0:

@@ -45,6 +45,9 @@ class MonoParams:
     ratio: float = 0.8
     min_inliers: int = 20                 # below: frame lost (ORB-SLAM mono uses 30 after local map)
     lost_frames_to_reset: int = 5         # consecutive lost frames before the map restarts
+    # with a relocaliser (the keyframe database, canopy.loop.mono.relocalise_mono) the map is
+    # kept this long while every lost frame tries to relocalise (ORB-SLAM keeps it for good)
+    reloc_lost_frames_to_reset: int = 30
     pose_rounds: int = 4
     pose_iterations: int = 10
     chi2_mono: float = CHI2_95_2DOF
@@ -101,6 +104,7 @@ class MonoParams:
         need(self.window_size >= 2, "window_size", "must be >= 2")
         need(self.max_frames_between_keyframes >= 1, "max_frames_between_keyframes", "must be >= 1")
         need(self.lost_frames_to_reset >= 1, "lost_frames_to_reset", "must be >= 1")
+        need(self.reloc_lost_frames_to_reset >= 1, "reloc_lost_frames_to_reset", "must be >= 1")
         need(self.sim3_iterations >= 1, "sim3_iterations", "must be >= 1")
         need(self.sim3_min_inliers >= 3, "sim3_min_inliers", "must be >= 3")
         need(self.loop_max_scale_change > 0, "loop_max_scale_change", "must be > 0")

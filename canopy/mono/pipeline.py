@@ -30,6 +30,7 @@ class MonoRunResult:
     mapping_timings: list[dict[str, float]] = field(default_factory=list)
     closures: list = field(default_factory=list)          # canopy.loop.LoopClosure, with loops on
     detection: dict = field(default_factory=dict)         # the loop detector's counts
+    n_relocalised: int = 0                                # lost frames put back on the map
 
     @property
     def tracked_mask(self) -> np.ndarray:
@@ -42,7 +43,8 @@ def run_mono_sequential(source, tracking_params: TrackingParams | None = None, m
     """``fast``: optional callable image -> (threshold, fallback, min_keypoints) (AFE Eq. 18-19).
     ``vocabulary``: with one (and ``mono_params.loop_enabled``), loops are closed in Sim(3)
     after every keyframe (``canopy.loop.mono.MonoLoopCloser``), the map corrected and the loop's
-    two sides fused before the local-map update goes back to tracking."""
+    two sides fused before the local-map update goes back to tracking; a lost frame tries to
+    relocalise against the loop closer's keyframe database (``make_mono_relocaliser``)."""
     tracking_params = tracking_params or TrackingParams()
     mono_params = mono_params or MonoParams()
     calib = source.calibration
@@ -56,7 +58,10 @@ def run_mono_sequential(source, tracking_params: TrackingParams | None = None, m
     if vocabulary is not None and mono_params.loop_enabled:
         from canopy.loop.mono import MonoLoopCloser
 
+        from canopy.loop.mono import make_mono_relocaliser
+
         closer = MonoLoopCloser(calib, loop_params, vocabulary, mono_params)
+        tracker.relocaliser = make_mono_relocaliser(closer, mapper, vocabulary)
     for i in range(n):
         frame = source.frame(i)
         if fast is not None:
@@ -88,7 +93,7 @@ def run_mono_sequential(source, tracking_params: TrackingParams | None = None, m
                      "consistent": d.consistent, "verified": d.verified, "rejected": dict(d.rejected)}
     return MonoRunResult(traj, mapper.keyframe_trajectory(), mapper.map_points(), statuses, kf_indices, first_init,
                          tracker.n_initialisations, track_t, map_t, closer.closures if closer is not None else [],
-                         detection)
+                         detection, tracker.n_relocalised)
 
 
 def _close_loops(closer, kf, mapper, update, vocabulary, on_closure):

@@ -122,6 +122,10 @@ class MonoTracker:
         self._frames_since_kf = 0
         self._tracked_after_kf: int | None = None
         self._seen: list[tuple[np.ndarray, np.ndarray]] = []
+        # relocaliser(frame, features) -> (T_world_cam, keyframe, LocalMapUpdate around it) or None:
+        # tried on every frame while lost (ORB-SLAM Relocalization; canopy.loop.mono)
+        self.relocaliser = None
+        self.n_relocalised = 0
 
     # ------------------------------------------------------------------ map view
     def apply_map_update(self, update: LocalMapUpdate) -> None:
@@ -155,6 +159,12 @@ class MonoTracker:
         if not self.initialised:
             res = self._try_initialise(frame, feats, timings)
         else:
+            if self._lost_run > 0 and self.relocaliser is not None:
+                t0 = time.perf_counter()
+                found = self.relocaliser(frame, feats)
+                timings["relocalise"] = _ms(t0)
+                if found is not None:
+                    self._relocalise_to(*found)
             res = self._track_frame(frame, feats, timings)
         timings["total"] = _ms(t_all)
         res.timings = timings
@@ -245,6 +255,16 @@ class MonoTracker:
         self._frames_since_kf = 0
         self._tracked_after_kf = None
 
+    def _relocalise_to(self, T_wc: np.ndarray, kf_index: int, update: LocalMapUpdate) -> None:
+        """Back on the map after a relocalisation: the local map around the matched keyframe,
+        the pose it gave, no motion; the frame is then tracked as any other."""
+        self._view = _View(update.landmark_ids, update.positions, update.descriptors)
+        self._last_matched = (np.zeros((0, 3)), as_words(_EMPTY_DESC), np.zeros(0, np.int64))
+        self._set_reference(kf_index, np.asarray(update.keyframe_poses[kf_index], float))
+        self._T_last = np.asarray(T_wc, float).copy()
+        self._velocity = np.eye(4)
+        self.n_relocalised += 1
+
     def _reset(self) -> None:
         """Lost for too long: start a new map segment (ORB-SLAM monocular resets the map)."""
         self.initialised = False
@@ -318,7 +338,8 @@ class MonoTracker:
         self._lost_run += 1
         self._velocity = np.eye(4)
         self._seen = []
-        if self._lost_run >= self.mono.lost_frames_to_reset:
+        limit = self.mono.lost_frames_to_reset if self.relocaliser is None else self.mono.reloc_lost_frames_to_reset
+        if self._lost_run >= limit:
             self._reset()
         return MonoTrackingResult(frame.index, frame.timestamp, self._T_last.copy(), STATUS_LOST, n_inl, n_matches,
                                   False, None, self._ref_kf)
