@@ -25,7 +25,7 @@ import numpy as np
 from actors.runtime import Actor, ActorContext
 from canopy.backend import LocalMapper
 from canopy.loop.correction import corrections_from_arrays
-from canopy.loop.mapping_hooks import apply_loop_result, catch_up_pose, loop_keyframe_message
+from canopy.loop.mapping_hooks import apply_loop_result, catch_up_pose, loop_keyframe_message, remap_landmarks
 from protocol.messages import EndOfStream, KeyframeData, LoopResult, MapSnapshot
 
 
@@ -39,6 +39,9 @@ class LocalMappingActor(Actor):
                                      pixel_sigma=float(self.config.get("pixel_sigma", 1.0)))
         else:
             self.mapper = LocalMapper(self.config["calib"], self.config["params"])
+            if self.config.get("load_map"):  # --load-map: the saved map is the map this run starts from
+                from canopy.loop.map_io import load_map, restore_mapper
+                restore_mapper(load_map(self.config["load_map"], self.config["calib"]), self.mapper)
         self.snapshot_period = float(self.config.get("snapshot_period_s", 0.5))
         self.last_snapshot = 0.0
         self.n_keyframes = 0
@@ -48,12 +51,14 @@ class LocalMappingActor(Actor):
         self.loops = 0
         self.loop_epoch = 0                      # loop corrections applied to the map
         self.epoch_corrections: dict[int, dict] = {}  # epoch -> keyframe corrections of that loop
+        self.landmark_alias: dict[int, int] = {}  # landmarks fused across a loop -> the one kept
 
     def on_message(self, msg, ctx: ActorContext) -> None:
         if isinstance(msg, KeyframeData):
             if msg.loop_epoch < self.loop_epoch:  # tracked before the latest correction reached tracking
                 msg.T_world_cam = catch_up_pose(msg.index, msg.T_world_cam, self.epoch_corrections,
                                                 msg.loop_epoch, self.loop_epoch)
+            remap_landmarks(msg, self.landmark_alias)
             update = self.mapper.insert_keyframe(msg)
             self.n_keyframes += 1
             if self.loop_on:
@@ -76,7 +81,7 @@ class LocalMappingActor(Actor):
             ctx.stop()
 
     def _on_loop_result(self, result: LoopResult, update) -> bool:
-        changed = apply_loop_result(self.mapper, result, update)
+        changed = apply_loop_result(self.mapper, result, update, self.landmark_alias)
         self.loops = max(self.loops, int(result.loops))
         if changed:
             self.loop_epoch += 1

@@ -15,7 +15,8 @@ import numpy as np
 from canopy.backend import LocalMapper, MappingParams
 from canopy.frontend import STATUS_LOST, Tracker, TrackingParams
 from canopy.loop.closer import LoopCloser, LoopClosure
-from canopy.loop.correction import apply_loop_correction, refresh_update
+from canopy.loop.correction import apply_global_ba, apply_loop_correction, fuse_landmarks, refresh_update
+from canopy.loop.mapping_hooks import landmark_positions, remap_landmarks
 from canopy.loop.database import FeatureStats
 from canopy.loop.keyframe import PlaceKeyframe, with_bow
 from canopy.loop.params import LoopParams
@@ -31,7 +32,8 @@ def place_keyframe_from_map(kf_data, mapper) -> PlaceKeyframe:
                          u_right=np.asarray(kf_data.u_right, np.float64), depth=np.asarray(kf_data.depth, np.float64),
                          octave=np.asarray(kf_data.octave, np.int64), descriptors=np.asarray(kf_data.descriptors, np.uint8),
                          landmark_ids=np.asarray(rec.landmark, np.int64).copy(),
-                         stats=FeatureStats.of(np.zeros((0, 2)), kf_data.line_segments))
+                         stats=FeatureStats.of(np.zeros((0, 2)), kf_data.line_segments),
+                         landmark_positions=landmark_positions(mapper, rec.landmark))
 
 
 @dataclass
@@ -59,11 +61,17 @@ def run_sequential_with_loops(source, vocabulary, tracking_params: TrackingParam
         statuses.append(res.status)
         track_poses.append(res.T_world_cam.copy())
         if res.is_keyframe and res.keyframe is not None:
+            remap_landmarks(res.keyframe, closer.alias)
             update = mapper.insert_keyframe(res.keyframe)
             kf = with_bow(place_keyframe_from_map(res.keyframe, mapper), vocabulary)
             closure = closer.add_keyframe(kf, update.keyframe_poses)
             if closure is not None:
                 apply_loop_correction(mapper, closure.corrections)
+                fuse_landmarks(mapper, closure.fused)
+                if closer.ba_pending:  # lockstep reference: the full BA at once
+                    ba = closer.global_bundle_adjust()
+                    if ba is not None:
+                        apply_global_ba(mapper, ba.corrections, ba.landmark_ids, ba.positions)
                 refresh_update(mapper, update)
                 if on_closure is not None:
                     on_closure(closure)
