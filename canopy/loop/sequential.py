@@ -43,6 +43,7 @@ class LoopRunResult:
     statuses: list[str]
     closures: list[LoopClosure] = field(default_factory=list)
     detection: dict = field(default_factory=dict)
+    mapper: object = None        # the final map (for --save-map style snapshots in tests)
 
 
 def run_sequential_with_loops(source, vocabulary, tracking_params: TrackingParams | None = None,
@@ -88,4 +89,4 @@ def run_sequential_with_loops(source, vocabulary, tracking_params: TrackingParam
     s = closer.detector.stats
     return LoopRunResult(traj, mapper.keyframe_trajectory(), statuses, closer.closures,
                          {"keyframes": s.keyframes, "queries": s.queries, "candidates": s.candidates,
-                          "consistent": s.consistent, "verified": s.verified, "rejected": dict(s.rejected)})
+                          "consistent": s.consistent, "verified": s.verified, "rejected": dict(s.rejected)}, mapper)
