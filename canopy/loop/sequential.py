@@ -20,6 +20,7 @@ from canopy.loop.mapping_hooks import landmark_positions, remap_landmarks
 from canopy.loop.database import FeatureStats
 from canopy.loop.keyframe import PlaceKeyframe, with_bow
 from canopy.loop.params import LoopParams
+from canopy.loop.relocalise import PlaceMemory
 from shared.types import Trajectory
 
 
@@ -53,6 +54,8 @@ def run_sequential_with_loops(source, vocabulary, tracking_params: TrackingParam
     tracker = Tracker(calib, tracking_params or TrackingParams())
     mapper = LocalMapper(calib, mapping_params or MappingParams())
     closer = LoopCloser(calib, loop_params or LoopParams(), vocabulary)
+    # as the tracking actor: relocalisation by database query once the motion-model bridge runs out
+    tracker.attach_place_memory(PlaceMemory(calib, closer.params, vocabulary), live=True)
     n = len(source) if max_frames is None else min(len(source), max_frames)
     stamps, statuses, refs, rel, track_poses = [], [], [], [], []
     for i in range(n):
