@@ -62,7 +62,9 @@ class LocalMappingActor(Actor):
             update = self.mapper.insert_keyframe(msg)
             self.n_keyframes += 1
             if self.loop_on:
-                ctx.send("loop_closing", loop_keyframe_message(msg, self.mapper, update))
+                loop_msg = loop_keyframe_message(msg, self.mapper, update)
+                loop_msg.loop_epoch = self.loop_epoch  # the loop closer brings older poses up to date
+                ctx.send("loop_closing", loop_msg)
             self.last_update = update
             update.loop_epoch = self.loop_epoch
             # Tracking may already have finished at the end of a realtime run: never block on it.
@@ -97,6 +99,7 @@ class LocalMappingActor(Actor):
             msg = ctx.recv_inbox(100)
             if isinstance(msg, LoopResult):
                 self._on_loop_result(msg, None)
+                deadline = time.monotonic() + self.loop_wait_s  # alive (a full BA reports each step)
             elif isinstance(msg, EndOfStream):
                 return
 

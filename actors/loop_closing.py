@@ -50,7 +50,8 @@ class LoopClosingActor(Actor):
             t0 = time.perf_counter()
             kf = place_keyframe(msg, self.vocabulary)
             t_bow = (time.perf_counter() - t0) * 1e3
-            closure = self.closer.add_keyframe(kf, {int(k): v for k, v in msg.window_poses.items()})
+            closure = self.closer.add_keyframe(kf, {int(k): v for k, v in msg.window_poses.items()},
+                                               epoch=int(msg.loop_epoch))
             if closure is None:
                 ctx.send("local_mapping", LoopResult(keyframe_index=kf.index, loops=self.closer.n_loops,
                                                      timings_ms={"bow": t_bow}, sent_at=time.time()))
@@ -89,7 +90,12 @@ class LoopClosingActor(Actor):
         return None
 
     def _global_ba(self, ctx: ActorContext) -> None:
-        result = self.closer.global_bundle_adjust(on_iteration=ctx.heartbeat)
+        def step() -> None:  # keeps the supervisor and local mapping's end-of-run wait informed
+            ctx.heartbeat()
+            ctx.send("local_mapping", LoopResult(keyframe_index=-1, loops=self.closer.n_loops, sent_at=time.time()),
+                     block=False)
+
+        result = self.closer.global_bundle_adjust(on_iteration=step)
         if result is None:
             return
         ids = np.array(sorted(result.corrections), np.int64)

@@ -268,6 +268,7 @@ class LoopKeyframe:
     sent_at: float = 0.0
     # (N,3) float64 world position of landmark_ids[i] now (NaN where none): the full BA starts there
     landmark_positions: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    loop_epoch: int = 0          # loop corrections local mapping had applied when it sent this
 
 
 @message("loop_result")

@@ -56,6 +56,10 @@ class LoopCloser:
         self.alias: dict[int, int] = {}
         self.ba_pending = False
         self.ba_results: list[GlobalBAResult] = []
+        # every answer that moves the map (pose graph, full BA) is an epoch; a keyframe message
+        # sent before local mapping applied epoch e carries poses that are brought up to date
+        self.epoch = 0
+        self.epoch_corrections: dict[int, dict[int, np.ndarray]] = {}
 
     def _store_landmarks(self, kf: PlaceKeyframe) -> None:
         P = np.asarray(kf.landmark_positions, float).reshape(-1, 3)
@@ -93,9 +97,34 @@ class LoopCloser:
     def n_loops(self) -> int:
         return len(self.closures)
 
-    def add_keyframe(self, kf: PlaceKeyframe, window_poses: dict[int, np.ndarray] | None = None) -> LoopClosure | None:
+    def _catch_up(self, kf: PlaceKeyframe, window_poses: dict, epoch: int) -> dict:
+        """Poses and landmark positions local mapping sent before it applied this closer's
+        latest corrections, moved by them (each keyframe by its own or nearest older one's)."""
+        from canopy.loop.mapping_hooks import catch_up_pose
+
+        kf.T_world_cam = catch_up_pose(kf.index, kf.T_world_cam, self.epoch_corrections, epoch, self.epoch)
+        window_poses = {k: catch_up_pose(int(k), T, self.epoch_corrections, epoch, self.epoch)
+                        for k, T in window_poses.items()}
+        P = np.asarray(kf.landmark_positions, float).reshape(-1, 3)
+        if len(P) == len(kf):
+            ref = np.array([self.landmark_ref.get(int(l), kf.index) for l in np.asarray(kf.landmark_ids).tolist()])
+            for e in range(epoch + 1, self.epoch + 1):
+                P = correct_landmarks(P, ref, self.epoch_corrections.get(e, {}))
+            kf.landmark_positions = P
+        return window_poses
+
+    def _new_epoch(self, corrections: dict[int, np.ndarray]) -> None:
+        self.epoch += 1
+        self.epoch_corrections[self.epoch] = corrections
+
+    def add_keyframe(self, kf: PlaceKeyframe, window_poses: dict[int, np.ndarray] | None = None,
+                     epoch: int | None = None) -> LoopClosure | None:
+        """``epoch``: the corrections local mapping had applied when it sent ``kf`` (None: all)."""
         t0 = time.perf_counter()
-        for k, T in (window_poses or {}).items():
+        window_poses = dict(window_poses or {})
+        if epoch is not None and epoch < self.epoch:
+            window_poses = self._catch_up(kf, window_poses, epoch)
+        for k, T in window_poses.items():
             if k in self.poses:
                 self.poses[int(k)] = np.asarray(T, float)
         self.poses[kf.index] = np.asarray(kf.T_world_cam, float)
@@ -113,6 +142,7 @@ class LoopCloser:
         result = optimise_pose_graph(before, edges, self.params, fixed=order[0])
         self.poses = {k: T.copy() for k, T in result.poses.items()}
         corrections = pose_corrections(before, result.poses)
+        self._new_epoch(corrections)
         self._correct_positions(corrections)
         t2 = time.perf_counter()
         fused = self._fuse(constraint) if self.params.fuse else {}
@@ -159,5 +189,6 @@ class LoopCloser:
             self.poses[k] = T.copy()
         for lid, P in zip(result.landmark_ids.tolist(), result.positions):
             self.positions[lid] = P.copy()
+        self._new_epoch(result.corrections)
         self.ba_results.append(result)
         return result
