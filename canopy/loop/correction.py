@@ -41,8 +41,12 @@ def refresh_update(mapper, update) -> None:
     add every keyframe pose so tracking's reference keyframe is among them."""
     ids = np.asarray(update.landmark_ids, np.int64)
     if len(ids):
-        update.positions = np.array([mapper.landmarks[i].position if i in mapper.landmarks else p
-                                     for i, p in zip(ids.tolist(), np.asarray(update.positions, float))], float)
+        # landmarks fused away (or culled) since the update was made leave tracking's view
+        keep = np.array([i in mapper.landmarks for i in ids.tolist()], bool)
+        ids = ids[keep]
+        update.landmark_ids = ids
+        update.descriptors = np.asarray(update.descriptors, np.uint8).reshape(-1, 32)[keep]
+        update.positions = np.array([mapper.landmarks[i].position for i in ids.tolist()], float).reshape(-1, 3)
     lines = getattr(mapper, "lines", {})
     line_ids = np.asarray(getattr(update, "line_ids", np.zeros(0)), np.int64)
     if len(line_ids):
