@@ -68,7 +68,7 @@ class LoopClosingActor(Actor):
                                        n_inliers=result.n_inliers, loops=result.loops, timings_ms=result.timings_ms,
                                        sent_at=result.sent_at))
             s = self.closer.detector.stats
-            ctx.extra.update({"loops": self.closer.n_loops, "keyframes": s.keyframes, "queries": s.queries,
+            ctx.extra.update({"loops": self.closer.n_loops, "fused": len(self.closer.alias), "keyframes": s.keyframes, "queries": s.queries,
                               "candidates": s.candidates, "consistent": s.consistent, "verified": s.verified,
                               **{f"rejected_{k}": v for k, v in s.rejected.items()}})
         elif isinstance(msg, EndOfStream):
