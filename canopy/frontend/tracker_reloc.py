@@ -58,12 +58,13 @@ class TrackerRelocalisationMixin:
                                  kf.descriptors, ids)
         new = kf.new_landmark_ids >= 0
         if new.any() and kf.index in self._provisional:
-            self._place.set_landmarks(*self._provisional[kf.index])
+            ids, pos, _ = self._provisional[kf.index]
+            self._place.set_landmarks(ids, pos)
 
     def _remember_update(self, update) -> None:
         if self._place is None or not self._place_live:
             return
-        self._place.set_landmarks(update.landmark_ids, update.positions, update.descriptors)
+        self._place.set_landmarks(update.landmark_ids, update.positions)
         for k, T in update.keyframe_poses.items():
             self._place.set_pose(int(k), T)
 

@@ -47,13 +47,13 @@ class PlaceMemory:
         self.params = (params or LoopParams()).validate()
         self.vocabulary = vocabulary
         self.keyframes: dict[int, PlaceKeyframe] = {}
-        self.covisibility = Covisibility()
+        self._covisibility = Covisibility()
+        self._saved_covisibility = False    # a loaded map brings its counts; else counted on demand
         self.database = KeyframeDatabase()
         self._in_database: set[int] = set()
         self.lm_ids = np.zeros(0, np.int64)
         self.lm_pos = np.zeros((0, 3))
-        self.lm_desc = np.zeros((0, 32), np.uint8)
-        self._pending: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self._pending: list[tuple[np.ndarray, np.ndarray]] = []
 
     # ------------------------------------------------------------------ filling
     @classmethod
@@ -70,7 +70,13 @@ class PlaceMemory:
             mem.add_keyframe(int(index), float(data.kf_timestamp[k]), data.kf_pose[k], data.uv[rows],
                              np.where(good[rows], data.u_right[rows], -1.0), depth[rows], data.octave[rows],
                              data.descriptors[rows], data.landmark[rows])
-        mem.set_landmarks(data.lm_id, data.lm_position, data.lm_descriptor)
+        mem.set_landmarks(data.lm_id, data.lm_position)
+        # the saved covisibility (shared-landmark counts) instead of recounting every observation
+        counts = mem._covisibility._counts
+        for a, b, n in np.asarray(data.covisibility, np.int64).reshape(-1, 3).tolist():
+            counts.setdefault(a, {})[b] = n
+            counts.setdefault(b, {})[a] = n
+        mem._saved_covisibility = True
         mem.build_database()
         return mem
 
@@ -81,29 +87,43 @@ class PlaceMemory:
                            depth=np.asarray(depth, np.float64), octave=np.asarray(octave, np.int64),
                            descriptors=np.asarray(descriptors, np.uint8), landmark_ids=np.asarray(landmark_ids, np.int64).copy())
         self.keyframes[kf.index] = kf
-        self.covisibility.add(kf.index, kf.landmark_ids)
+
+    def covisible(self, keyframe: int, n: int) -> list[int]:
+        """The ``n`` keyframes sharing most landmarks with ``keyframe`` (at least
+        ``covisibility_min_shared``): the saved counts of a loaded map, or counted now (adding a
+        keyframe during a run stays free; a query costs one ``isin`` per keyframe)."""
+        min_shared = self.params.covisibility_min_shared
+        if self._saved_covisibility:
+            return self._covisibility.best(keyframe, n, min_shared)
+        mine = self.keyframes[keyframe].landmark_ids
+        mine = np.unique(mine[mine >= 0])
+        counts = [(int(np.isin(kf.landmark_ids, mine, assume_unique=False).sum()), k)
+                  for k, kf in self.keyframes.items() if k != keyframe]
+        counts = sorted(((c, k) for c, k in counts if c >= min_shared), key=lambda ck: (-ck[0], ck[1]))
+        return [k for _, k in counts[:n]]
 
     def set_pose(self, index: int, T_world_cam) -> None:
         kf = self.keyframes.get(int(index))
         if kf is not None:
             kf.T_world_cam = np.asarray(T_world_cam, float).copy()
 
-    def set_landmarks(self, ids, positions, descriptors) -> None:
-        """Newer positions win; merged lazily (a keyframe's worth of updates costs a list append)."""
-        self._pending.append((np.asarray(ids, np.int64).copy(), np.asarray(positions, float).reshape(-1, 3).copy(),
-                              np.asarray(descriptors, np.uint8).reshape(-1, 32).copy()))
-        if len(self._pending) >= 16:
+    def set_landmarks(self, ids, positions) -> None:
+        """Newer positions win; merged lazily (an update costs a copy and a list append, a merge
+        every ``MERGE_EVERY`` updates)."""
+        self._pending.append((np.asarray(ids, np.int64).copy(), np.asarray(positions, np.float32).reshape(-1, 3).copy()))
+        if len(self._pending) >= self.MERGE_EVERY:
             self._merge()
+
+    MERGE_EVERY = 128
 
     def _merge(self) -> None:
         if not self._pending:
             return
-        parts = self._pending[::-1] + [(self.lm_ids, self.lm_pos, self.lm_desc)]  # newest first
+        parts = self._pending[::-1] + [(self.lm_ids, self.lm_pos)]  # newest first
         ids = np.concatenate([p[0] for p in parts])
         _, first = np.unique(ids, return_index=True)
         self.lm_ids = ids[first]
-        self.lm_pos = np.concatenate([p[1] for p in parts])[first]
-        self.lm_desc = np.concatenate([p[2] for p in parts])[first]
+        self.lm_pos = np.concatenate([np.asarray(p[1], np.float64) for p in parts])[first]
         self._pending = []
 
     def build_database(self) -> None:
@@ -131,23 +151,26 @@ class PlaceMemory:
         n = self.params.fuse_neighbours if n is None else n
         out: list[int] = []
         for c in centres:
-            for k in [int(c)] + self.covisibility.best(int(c), n, self.params.covisibility_min_shared):
+            for k in [int(c)] + self.covisible(int(c), n):
                 if k in self.keyframes and k not in out:
                     out.append(k)
         return out
 
     def local_map(self, centres, n: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(ids, positions, descriptors) of the landmarks seen by the local keyframes of ``centres``."""
+        """(ids, positions, descriptors) of the landmarks seen by the local keyframes of ``centres``;
+        a landmark's descriptor is that of its keypoint in the most central keyframe seeing it."""
         self._merge()
         kfs = self.local_keyframes(centres, n)
         if not kfs or not len(self.lm_ids):
             return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 32), np.uint8)
-        ids = np.unique(np.concatenate([self.keyframes[k].landmark_ids for k in kfs]))
-        ids = ids[ids >= 0]
+        all_ids = np.concatenate([self.keyframes[k].landmark_ids for k in kfs])
+        all_desc = np.concatenate([self.keyframes[k].descriptors for k in kfs])
+        ids, first = np.unique(all_ids, return_index=True)
+        keep = ids >= 0
+        ids, first = ids[keep], first[keep]
         j = np.clip(np.searchsorted(self.lm_ids, ids), 0, len(self.lm_ids) - 1)
         known = self.lm_ids[j] == ids
-        j = j[known]
-        return self.lm_ids[j], self.lm_pos[j], self.lm_desc[j]
+        return self.lm_ids[j[known]], self.lm_pos[j[known]], all_desc[first[known]]
 
     def best_keyframe(self, landmark_ids: np.ndarray) -> int | None:
         """The keyframe sharing the most of ``landmark_ids`` (ORB-SLAM: the reference keyframe of
