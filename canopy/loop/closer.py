@@ -20,10 +20,10 @@ import numpy as np
 
 from canopy.frontend.geometry import rotation_angle, se3_inv
 from canopy.loop.detector import LoopDetector
-from canopy.loop.full_ba import GlobalBAResult, fuse_across_loop, global_bundle_adjust, resolve_array
+from canopy.loop.full_ba import GlobalBAResult, fuse_across_loop, resolve_array, run_ba_job
 from canopy.loop.keyframe import PlaceKeyframe
 from canopy.loop.params import LoopParams
-from canopy.loop.pose_graph import (LOOP, PoseGraphEdge, correct_landmarks, essential_graph_edges,
+from canopy.loop.pose_graph import (LOOP, PoseGraphEdge, correct_landmarks, correction_for, essential_graph_edges,
                                     optimise_pose_graph, pose_corrections)
 from canopy.loop.verify import LoopConstraint
 from shared.types import StereoCalibration
@@ -177,18 +177,34 @@ class LoopCloser:
             self.positions.pop(drop, None)
         return fused
 
-    def global_bundle_adjust(self, on_iteration=None) -> GlobalBAResult | None:
-        """Full BA over every keyframe and landmark of the loop closer's map (AGRI §3.4.2);
-        updates its own poses and positions and returns the result for local mapping."""
+    def ba_job(self) -> dict | None:
+        """What a full BA needs, as a snapshot (it may run in another process while this closer
+        goes on taking keyframes); None when there is nothing to adjust."""
         self.ba_pending = False
         if len(self.poses) < 2:
             return None
-        result = global_bundle_adjust(self.detector.keyframes, self.poses, self.positions, self.calib, self.params,
-                                      self.alias, fixed=min(self.poses), on_iteration=on_iteration)
-        for k, T in result.poses.items():
-            self.poses[k] = T.copy()
+        return {"keyframes": dict(self.detector.keyframes), "poses": {k: T.copy() for k, T in self.poses.items()},
+                "positions": dict(self.positions), "calib": self.calib, "params": self.params,
+                "alias": dict(self.alias), "fixed": min(self.poses), "epoch": self.epoch}
+
+    def accept_ba(self, result: GlobalBAResult) -> GlobalBAResult:
+        """Take a full BA's answer into this closer's map: keyframes move by its corrections
+        (those added since it started with the nearest older one), its landmarks take its
+        positions, the others move with their reference keyframe; a new epoch."""
+        for k in list(self.poses):
+            self.poses[k] = correction_for(int(k), result.corrections) @ self.poses[k]
+        self._correct_positions(result.corrections)
         for lid, P in zip(result.landmark_ids.tolist(), result.positions):
-            self.positions[lid] = P.copy()
+            if lid in self.positions:
+                self.positions[lid] = P.copy()
         self._new_epoch(result.corrections)
         self.ba_results.append(result)
         return result
+
+    def global_bundle_adjust(self, on_iteration=None) -> GlobalBAResult | None:
+        """Full BA over every keyframe and landmark of the loop closer's map (AGRI §3.4.2), at
+        once (the in-process runner); returns the result for local mapping."""
+        job = self.ba_job()
+        if job is None:
+            return None
+        return self.accept_ba(run_ba_job(job, on_iteration))

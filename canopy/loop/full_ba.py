@@ -197,6 +197,23 @@ def global_bundle_adjust(keyframes: dict[int, PlaceKeyframe], poses: dict[int, n
                           {"build": t_build * 1e3, "total": (time.perf_counter() - t0) * 1e3})
 
 
+def run_ba_job(job: dict, on_iteration=None) -> GlobalBAResult:
+    """``global_bundle_adjust`` of a ``LoopCloser.ba_job()`` snapshot."""
+    return global_bundle_adjust(job["keyframes"], job["poses"], job["positions"], job["calib"], job["params"],
+                                job["alias"], fixed=job["fixed"], on_iteration=on_iteration)
+
+
+def ba_worker(conn, job: dict) -> None:
+    """Entry of the full-BA child process of the loop closer: the result (or the error, as
+    text) goes back through ``conn``; nothing else of the parent (its sockets) is touched."""
+    try:
+        conn.send(("ok", run_ba_job(job)))
+    except Exception as exc:  # reported by the actor, which carries on without the BA
+        conn.send(("error", f"{type(exc).__name__}: {exc}"))
+    finally:
+        conn.close()
+
+
 def fuse_across_loop(keyframes: dict[int, PlaceKeyframe], poses: dict[int, np.ndarray],
                      positions: dict[int, np.ndarray], query_group: list[int], candidate_group: list[int],
                      calib: StereoCalibration, params: LoopParams, alias: dict[int, int]) -> dict[int, int]:
