@@ -156,3 +156,26 @@ def test_loop_closer_actor_runs_the_full_ba_in_a_child_process(lap):
     t, r = _max_errors(moved, lap["gt"])
     assert t < 0.03 and r < 0.2     # local mapping's drifted map, corrected, is the exact lap
     assert all(np.allclose(actor.closer.poses[k], moved[k]) for k in moved)
+
+
+def test_fused_landmark_is_merged_in_the_map_and_tracking_sees_the_kept_one():
+    from canopy.backend import LocalMapper
+    from canopy.backend.map_store import Keyframe, Landmark
+    from canopy.loop.correction import fuse_landmarks, refresh_update
+    from protocol.messages import LocalMapUpdate
+
+    m = LocalMapper(CALIB)
+    d = np.arange(3 * 32, dtype=np.uint8).reshape(3, 32)
+    for k, lms in ((0, [1, 2, -1]), (5, [3, 2, 4])):
+        m.keyframes[k] = Keyframe(k, float(k), np.eye(4), np.zeros((3, 2)), np.full(3, -1.0), np.zeros(3, np.int64), d,
+                                  np.array(lms, np.int64), 0, k)
+    for lid, obs in ((1, {0: 0}), (2, {0: 1, 5: 1}), (3, {5: 0}), (4, {5: 2})):
+        m.landmarks[lid] = Landmark(lid, np.full(3, float(lid)), d[0], dict(obs))
+    assert fuse_landmarks(m, {3: 1, 4: 99}) == 1            # 99 does not exist: 4 is left alone
+    assert 3 not in m.landmarks and m.landmarks[1].obs == {0: 0, 5: 0}
+    assert m.keyframes[5].landmark.tolist() == [1, 2, 4]
+    update = LocalMapUpdate(5, np.array([2, 3, 4], np.int64), np.zeros((3, 3)), np.zeros((3, 32), np.uint8))
+    refresh_update(m, update, {3: 1})
+    assert update.landmark_ids.tolist() == [1, 2, 4]        # the duplicate's place taken by the kept landmark
+    assert np.allclose(update.positions, [[1, 1, 1], [2, 2, 2], [4, 4, 4]])
+    assert len(update.descriptors) == 3 and set(update.keyframe_poses) == {0, 5}

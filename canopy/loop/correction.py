@@ -36,16 +36,19 @@ def apply_loop_correction(mapper, corrections: dict[int, np.ndarray]) -> int:
     return len(mapper.keyframes)
 
 
-def refresh_update(mapper, update) -> None:
+def refresh_update(mapper, update, alias: dict[int, int] | None = None) -> None:
     """Re-read the positions and poses of a ``LocalMapUpdate`` from the corrected map, and
     add every keyframe pose so tracking's reference keyframe is among them."""
     ids = np.asarray(update.landmark_ids, np.int64)
     if len(ids):
-        # landmarks fused away (or culled) since the update was made leave tracking's view
-        keep = np.array([i in mapper.landmarks for i in ids.tolist()], bool)
-        ids = ids[keep]
+        # a landmark fused away is replaced by the one it was merged into (the tracker keeps
+        # seeing that tree); culled ones leave tracking's view
+        if alias:
+            from canopy.loop.full_ba import resolve_array
+            ids = np.unique(resolve_array(ids, alias))
+        ids = np.array([i for i in ids.tolist() if i in mapper.landmarks], np.int64)
         update.landmark_ids = ids
-        update.descriptors = np.asarray(update.descriptors, np.uint8).reshape(-1, 32)[keep]
+        update.descriptors = np.array([mapper.landmarks[i].descriptor for i in ids.tolist()], np.uint8).reshape(-1, 32)
         update.positions = np.array([mapper.landmarks[i].position for i in ids.tolist()], float).reshape(-1, 3)
     lines = getattr(mapper, "lines", {})
     line_ids = np.asarray(getattr(update, "line_ids", np.zeros(0)), np.int64)

@@ -60,7 +60,7 @@ def apply_loop_result(mapper, result: LoopResult, update: LocalMapUpdate | None,
         if alias is not None:
             alias.update(fused)
     if update is not None:
-        refresh_update(mapper, update)
+        refresh_update(mapper, update, alias)
     return True
 
 

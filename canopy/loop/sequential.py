@@ -76,7 +76,7 @@ def run_sequential_with_loops(source, vocabulary, tracking_params: TrackingParam
                     ba = closer.global_bundle_adjust()
                     if ba is not None:
                         apply_global_ba(mapper, ba.corrections, ba.landmark_ids, ba.positions)
-                refresh_update(mapper, update)
+                refresh_update(mapper, update, closer.alias)
                 if on_closure is not None:
                     on_closure(closure)
             tracker.apply_map_update(update)
