@@ -67,6 +67,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--save-map", default=None, metavar="PATH",
                    help="write the final map (keyframes, landmarks, descriptors, covisibility) to PATH "
                         "(versioned msgpack, canopy.loop.map_io)")
+    p.add_argument("--load-map", default=None, metavar="PATH",
+                   help="start from a map written by --save-map: the first frames are relocalised in it "
+                        "(keyframe-database query + stereo PnP); needs --localize")
+    p.add_argument("--localize", action="store_true",
+                   help="with --load-map: track in the loaded map without adding keyframes or changing it")
     p.add_argument("--sensor", choices=("stereo", "mono"), default=None,
                    help="stereo pairs, or the left image only (monocular: two-view initialisation, "
                         "a map without metric scale, Sim(3)-aligned ATE in metrics.json); default from "
@@ -100,7 +105,8 @@ def main(argv: list[str] | None = None) -> int:
                           max_frames=args.max_frames, enhance=args.enhance, inspect=args.inspect,
                           progress=not args.quiet, preset=args.preset, seed=args.seed, lines=args.lines,
                           record=args.record, inspect_keys=args.inspect_keys, loop=args.loop,
-                          save_map=args.save_map, sensor=args.sensor)
+                          save_map=args.save_map, sensor=args.sensor, load_map=args.load_map,
+                          localize=args.localize)
     except CanopyError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -25,7 +25,7 @@ import numpy as np
 from actors.runtime import Actor, ActorContext
 from canopy.backend import LocalMapper
 from canopy.loop.correction import corrections_from_arrays
-from canopy.loop.mapping_hooks import apply_loop_result, catch_up_pose, loop_keyframe_message
+from canopy.loop.mapping_hooks import apply_loop_result, catch_up_pose, loop_keyframe_message, remap_landmarks
 from protocol.messages import EndOfStream, KeyframeData, LoopResult, MapSnapshot
 
 
@@ -40,6 +40,9 @@ class LocalMappingActor(Actor):
                                      pixel_sigma=float(self.config.get("pixel_sigma", 1.0)))
         else:
             self.mapper = LocalMapper(self.config["calib"], self.config["params"])
+            if self.config.get("load_map"):  # --load-map: the saved map is the map this run starts from
+                from canopy.loop.map_io import load_map, restore_mapper
+                restore_mapper(load_map(self.config["load_map"], self.config["calib"]), self.mapper)
         self.snapshot_period = float(self.config.get("snapshot_period_s", 0.5))
         self.last_snapshot = 0.0
         self.n_keyframes = 0
@@ -49,6 +52,7 @@ class LocalMappingActor(Actor):
         self.loops = 0
         self.loop_epoch = 0                      # loop corrections applied to the map
         self.epoch_corrections: dict[int, dict] = {}  # epoch -> keyframe corrections of that loop
+        self.landmark_alias: dict[int, int] = {}  # landmarks fused across a loop -> the one kept
 
     def on_message(self, msg, ctx: ActorContext) -> None:
         if isinstance(msg, KeyframeData):
@@ -58,14 +62,17 @@ class LocalMappingActor(Actor):
                 if self.mono:  # the corrections are similarities: keep the pose rigid
                     from canopy.loop.sim3 import rigid_pose
                     msg.T_world_cam = rigid_pose(msg.T_world_cam)
+            remap_landmarks(msg, self.landmark_alias)
             update = self.mapper.insert_keyframe(msg)
             self.n_keyframes += 1
             if self.loop_on:
                 if self.mono:
                     from canopy.loop.mono import mono_loop_keyframe_message
-                    ctx.send("loop_closing", mono_loop_keyframe_message(msg, self.mapper, update))
+                    loop_msg = mono_loop_keyframe_message(msg, self.mapper, update)
                 else:
-                    ctx.send("loop_closing", loop_keyframe_message(msg, self.mapper, update))
+                    loop_msg = loop_keyframe_message(msg, self.mapper, update)
+                loop_msg.loop_epoch = self.loop_epoch  # the loop closer brings older poses up to date
+                ctx.send("loop_closing", loop_msg)
             self.last_update = update
             update.loop_epoch = self.loop_epoch
             # Tracking may already have finished at the end of a realtime run: never block on it.
@@ -88,7 +95,7 @@ class LocalMappingActor(Actor):
             from canopy.loop.mono import apply_mono_loop_result
             changed = apply_mono_loop_result(self.mapper, result, update)
         else:
-            changed = apply_loop_result(self.mapper, result, update)
+            changed = apply_loop_result(self.mapper, result, update, self.landmark_alias)
         self.loops = max(self.loops, int(result.loops))
         if changed:
             self.loop_epoch += 1
@@ -104,6 +111,7 @@ class LocalMappingActor(Actor):
             msg = ctx.recv_inbox(100)
             if isinstance(msg, LoopResult):
                 self._on_loop_result(msg, None)
+                deadline = time.monotonic() + self.loop_wait_s  # alive (a full BA reports each step)
             elif isinstance(msg, EndOfStream):
                 return
 

@@ -38,6 +38,7 @@ class TrackingActor(Actor):
             self.tracker = MonoTracker(c["calib"], c["params"], c.get("mono"))
         else:
             self.tracker = Tracker(c["calib"], c["params"])
+            self._attach_place_memory(c)
         self.lockstep = c["clock"] == "lockstep"
         self.backlog = FrameBacklog(max_frame_age(c["clock"], c["frame_period_s"], c["max_lag_frames"]))
         self.wait_s = float(c.get("lockstep_wait_s", 60.0))
@@ -48,6 +49,26 @@ class TrackingActor(Actor):
         self.fast_min_keypoints = int(getattr(enh, "min_keypoints", 0)) if enh is not None else 0
         self.counts = {"ok": 0, "lost": 0, "init": 0, "predicted": 0, "keyframes": 0}
         self.loop_epoch = 0  # loop corrections received from local mapping
+
+    def _attach_place_memory(self, c: dict) -> None:
+        """Relocalisation by database query (canopy.loop.relocalise): in a map loaded with
+        --load-map, or, with loop closing on, in this run's own keyframes after a long gap."""
+        loop, map_path = c.get("loop"), c.get("load_map")
+        if not map_path and (loop is None or not loop.enabled):
+            return
+        from canopy.loop.params import LoopParams
+        from canopy.loop.relocalise import PlaceMemory
+        from canopy.loop.vocabulary import load_vocabulary
+
+        params = loop or LoopParams()
+        vocabulary = load_vocabulary(params.vocabulary)
+        if map_path:
+            from canopy.loop.map_io import load_map
+            memory = PlaceMemory.from_map(load_map(map_path, c["calib"]), params, vocabulary)
+            localize = bool(c.get("localize"))
+            self.tracker.attach_place_memory(memory, live=not localize, loaded=True, localize=localize)
+        else:
+            self.tracker.attach_place_memory(PlaceMemory(c["calib"], params, vocabulary), live=True)
 
     def _apply_update(self, update: LocalMapUpdate) -> None:
         self.tracker.apply_map_update(update)

@@ -62,12 +62,14 @@ def default_out_dir(dataset: str) -> Path:
 
 def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_frames: int | None,
                       rings: dict[str, str], calib, frame_rate_hz: float,
-                      record: str | None = None, save_map: str | None = None) -> list[ActorSpec]:
+                      record: str | None = None, save_map: str | None = None, load_map: str | None = None,
+                      localize: bool = False) -> list[ActorSpec]:
     ep = {name: Supervisor.endpoints(run_dir, name)
           for name in ("source", "enhancement", "tracking", "local_mapping", "loop_closing", "recorder")}
     to_recorder = ["recorder"] if record else []
-    # mono closes loops in Sim(3) (canopy.loop.mono) unless mono.loop_enabled is off
-    loop_on = (cfg.loop is not None and cfg.loop.enabled
+    # mono closes loops in Sim(3) (canopy.loop.mono) unless mono.loop_enabled is off; localisation
+    # in a loaded map makes no keyframes to close loops with
+    loop_on = (cfg.loop is not None and cfg.loop.enabled and not localize
                and (cfg.runtime.sensor != "mono" or cfg.mono is None or cfg.mono.loop_enabled))
     to_loop = ["loop_closing"] if loop_on else []
     events = f"ipc://{run_dir}/supervisor.events"
@@ -89,11 +91,12 @@ def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_fra
         spec("tracking", "actors.tracking:TrackingActor",
              {"ring": rings["enhanced"], "calib": calib, "params": cfg.tracking,
               "enhancement": cfg.enhancement, "lockstep_wait_s": rt.lockstep_wait_s,
-              "sensor": rt.sensor, "mono": cfg.mono},
+              "sensor": rt.sensor, "mono": cfg.mono, "loop": cfg.loop if cfg.runtime.sensor != "mono" else None,
+              "load_map": load_map, "localize": localize},
              ["local_mapping", "source", *to_recorder]),
         spec("local_mapping", "actors.local_mapping:LocalMappingActor",
              {"calib": calib, "params": cfg.mapping, "snapshot_period_s": rt.map_snapshot_period_s,
-              "lockstep_wait_s": rt.lockstep_wait_s, "save_map": save_map,
+              "lockstep_wait_s": rt.lockstep_wait_s, "save_map": save_map, "load_map": load_map,
               "sensor": rt.sensor, "mono": cfg.mono, "pixel_sigma": cfg.tracking.pixel_sigma,
               "vocabulary_id": Path(cfg.loop.vocabulary).name if loop_on and cfg.loop.vocabulary else
               ("default" if loop_on else "")},
@@ -110,7 +113,8 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
              inspect: str | None = None, progress: bool = True, preset: str | None = None,
              seed: int = 0, lines: bool | None = None, record: str | None = None,
              inspect_keys: str | None = None, loop: bool | None = None,
-             save_map: str | None = None, sensor: str | None = None) -> RunResult:
+             save_map: str | None = None, sensor: str | None = None, load_map: str | None = None,
+             localize: bool = False) -> RunResult:
     if dataset not in DATASETS:
         from shared.errors import ConfigError
         raise ConfigError("--dataset", f"unknown dataset {dataset!r}; choose one of {DATASETS}")
@@ -135,6 +139,7 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
         raise ConfigError("--inspect-keys", "only applies with --inspect")
     source = open_source(dataset_kind, path, max_frames=max_frames)  # validates the dataset before any process starts
     calib = source.calibration
+    load_map_path = _check_load_map(load_map, localize, calib, cfg)
     out_dir = prepare_out_dir(Path(out) if out else default_out_dir(dataset))
     record_path = None
     if record is not None:  # "" = the default name in the results folder
@@ -145,7 +150,8 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
     rings = {"raw": f"{tag}_raw", "enhanced": f"{tag}_enh"}
     save_map_path = str(Path(save_map).resolve()) if save_map else None
     specs = build_actor_specs(run_dir, cfg, dataset_kind, path, max_frames, rings, calib, source.rate_hz,
-                              record=record_path, save_map=save_map_path)
+                              record=record_path, save_map=save_map_path, load_map=load_map_path,
+                              localize=localize)
     # trajectory.tum and frames.csv grow as frames complete: a killed launcher still leaves them.
     collector = RunCollector(n_frames=len(source), progress=progress, out_dir=out_dir,
                              frame_stamps=source.timestamps)
@@ -193,6 +199,25 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
     _write_config(out_dir, cfg)
     text = format_summary(summary, outcome.reason, os.cpu_count() or 1)
     return RunResult(outcome=outcome, summary=summary, out_dir=out_dir, text=text)
+
+
+def _check_load_map(load_map: str | None, localize: bool, calib, cfg) -> str | None:
+    """--load-map / --localize checked before any process starts: the map must read, match this
+    camera's calibration (one-line error otherwise) and be used by a stereo run."""
+    from shared.errors import ConfigError
+
+    if load_map is None:
+        if localize:
+            raise ConfigError("--localize", "needs --load-map PATH (the map to localise in)")
+        return None
+    if cfg.runtime.sensor == "mono":
+        raise ConfigError("--load-map", "loaded maps are stereo maps; not available with --sensor mono")
+    if not localize:
+        raise ConfigError("--load-map", "extending a loaded map is not available yet; add --localize to track in it "
+                                        "without changing it")
+    from canopy.loop.map_io import load_map as read_map
+    read_map(load_map, calib)  # InputError naming the file: missing, not a map, other version or calibration
+    return str(Path(load_map).resolve())
 
 
 def prepare_out_dir(out_dir: Path) -> Path:

@@ -266,6 +266,9 @@ class LoopKeyframe:
     line_segments: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), np.float32))
     line_descriptors: np.ndarray = field(default_factory=lambda: np.zeros((0, 32), np.uint8))
     sent_at: float = 0.0
+    # (N,3) float64 world position of landmark_ids[i] now (NaN where none): the full BA starts there
+    landmark_positions: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    loop_epoch: int = 0          # loop corrections local mapping had applied when it sent this
 
 
 @message("loop_result")
@@ -286,3 +289,10 @@ class LoopResult:
     loops: int = 0               # loops closed so far in this run
     timings_ms: dict = field(default_factory=dict)
     sent_at: float = 0.0
+    # landmark fusion across the loop: (F,2) rows (duplicate, kept) to merge in the map
+    fused: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64))
+    # a full bundle adjustment's answer (not a new loop): ``corrections`` as above for the
+    # keyframes it optimised, and the optimised positions of its landmarks
+    global_ba: bool = False
+    landmark_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    landmark_positions: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))

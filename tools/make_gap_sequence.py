@@ -5,7 +5,12 @@ darkness: tracking loses every feature and must find the map again afterwards (i
 "KITTI 06 with frames 20-24 blank in both cameras"). Everything else (calibration, times,
 ground-truth poses, the other images) is copied unchanged.
 
-    python tools/make_gap_sequence.py OUT [--src data/kitti06_snippet] [--blank 20-24]
+With ``--resume-at N`` the camera is also "kidnapped": after the last blank frame the copy
+shows the source from frame N on (images and ground-truth poses; times stay as they are), a
+place seen earlier that the motion model cannot predict, only a relocalisation by database
+query can find.
+
+    python tools/make_gap_sequence.py OUT [--src data/kitti06_snippet] [--blank 20-24] [--resume-at N]
 """
 from __future__ import annotations
 
@@ -36,7 +41,7 @@ def parse_range(text: str) -> list[int]:
     return sorted(out)
 
 
-def make_gap_sequence(src: Path, out: Path, blank: list[int]) -> Path:
+def make_gap_sequence(src: Path, out: Path, blank: list[int], resume_at: int | None = None) -> Path:
     src, out = Path(src), Path(out)
     pair = next(((a, b) for a, b in IMAGE_DIR_PAIRS if (src / a).is_dir() and (src / b).is_dir()), None)
     if pair is None:
@@ -53,9 +58,30 @@ def make_gap_sequence(src: Path, out: Path, blank: list[int]) -> Path:
                 raise InputError(src / cam, f"frame {i} to blank does not exist ({len(files)} frames)")
             img = cv2.imread(str(files[i]), cv2.IMREAD_UNCHANGED)
             cv2.imwrite(str(files[i]), np.zeros_like(img))
-    (out / "GAP.md").write_text(f"Copy of {src} with frames {blank} blanked (black) in both cameras "
+        if resume_at is not None:
+            _resume(src / cam, files, blank, resume_at)
+    if resume_at is not None:
+        gt = out / "poses.txt"
+        if gt.is_file():
+            rows = gt.read_text().splitlines()
+            after = range(max(blank) + 1, len(rows))
+            rows[max(blank) + 1:] = [rows[resume_at + j] for j in range(len(after))]
+            gt.write_text("\n".join(rows) + "\n")
+    resumed = "" if resume_at is None else f"; after them the source from frame {resume_at} on (kidnapped camera)"
+    (out / "GAP.md").write_text(f"Copy of {src} with frames {blank} blanked (black) in both cameras{resumed} "
                                 f"by tools/make_gap_sequence.py.\n")
     return out
+
+
+def _resume(src_cam: Path, files: list[Path], blank: list[int], resume_at: int) -> None:
+    """Frames after the gap show the source from ``resume_at`` on (an earlier place: every frame has a source)."""
+    if not blank:
+        raise InputError("--resume-at", "needs frames to blank (the camera is carried away in the dark)")
+    if not 0 <= resume_at <= max(blank):
+        raise InputError("--resume-at", f"must be a frame before the end of the gap (0..{max(blank)}), got {resume_at}")
+    src_files = sorted(p for p in src_cam.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg"))
+    for j, i in enumerate(range(max(blank) + 1, len(files))):
+        shutil.copyfile(src_files[resume_at + j], files[i])
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -63,9 +89,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("out", help="output folder (replaced if it exists)")
     ap.add_argument("--src", default=str(ROOT / "data" / "kitti06_snippet"))
     ap.add_argument("--blank", default="20-24", help="frames to blank, e.g. 20-24 or 3,7-9")
+    ap.add_argument("--resume-at", type=int, default=None, metavar="N",
+                    help="after the blank frames, continue with the source's frame N (a kidnapped camera)")
     args = ap.parse_args(argv)
     try:
-        out = make_gap_sequence(Path(args.src), Path(args.out), parse_range(args.blank))
+        out = make_gap_sequence(Path(args.src), Path(args.out), parse_range(args.blank), args.resume_at)
     except CanopyError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

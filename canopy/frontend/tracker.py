@@ -36,6 +36,7 @@ from canopy.frontend.stereo import StereoMatches, match_stereo
 from canopy.frontend.track_health import (LOST_TOO_FEW_MATCHES, LOST_TOO_FEW_STEREO, image_noise_sigma,
                                           judge_pose)
 from canopy.frontend.tracker_lines import TrackerLinesMixin
+from canopy.frontend.tracker_reloc import TrackerRelocalisationMixin
 from shared.types import StereoCalibration, StereoFrame
 
 if TYPE_CHECKING:
@@ -50,7 +51,7 @@ def _ms(t0: float) -> float:
     return (time.perf_counter() - t0) * 1e3
 
 
-class Tracker(MapTrackingMixin, TrackerLinesMixin):
+class Tracker(MapTrackingMixin, TrackerLinesMixin, TrackerRelocalisationMixin):
     def __init__(self, calib: StereoCalibration, params: TrackingParams | None = None,
                  initial_pose: np.ndarray | None = None):
         self.calib = calib
@@ -129,6 +130,7 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin):
         """Replace the local-map view and apply corrected keyframe poses."""
         if update.keyframe_index < self._segment_start_kf:
             return  # stale update from a map segment before a restart
+        self._remember_update(update)  # relocalisation by database query (tracker_reloc)
         self._update_view.set(update.landmark_ids, update.positions, update.descriptors)
         for k in [k for k in self._provisional if k <= update.keyframe_index]:
             del self._provisional[k]
@@ -212,6 +214,8 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin):
             timings["lines_describe_worker"] = lines.stats["describe_ms"]
         if self._need_restart and 0 < self._lost_streak <= self.params.relocalise_bridge_frames:
             res = self._relocalise(frame, left, stereo, timings, lines)
+        elif self._db_reloc_due():  # after the bridge, or the start in a loaded map (tracker_reloc)
+            res = self._relocalise_by_query(frame, left, stereo)
         elif not self._initialised or self._need_restart:
             res = self._initialise(frame, left, stereo, n_stereo, lines)
         else:
@@ -302,6 +306,7 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin):
             octave=feats.octave.astype(np.int32), landmark_ids=matched_ids.copy(), new_landmark_ids=new_ids,
             scale_factor=self.params.scale_factor, restart=restart,
             seen_ids=uids, seen_visible=seen_visible, seen_found=seen_found, **line_fields)
+        self._remember_keyframe(kf)
         self._ref_kf = frame.index
         self._T_ref = T_wc.copy()
         self._ref_ids = np.unique(np.concatenate([matched_ids[matched_ids >= 0], new_ids[idx]]))
@@ -451,6 +456,9 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin):
         reasons = keyframe_reasons(p, since, ratio, n_ref, self._ref_tracked_first, n_tracked_close, n_new_close)
         need = bool(reasons)
         is_kf = need and since >= p.min_frames_between_keyframes
+        if is_kf and self._localize:  # localisation only: move in the loaded map, never add to it
+            self._switch_reference(matched_ids)
+            is_kf = False
         kf = self._make_keyframe(frame, feats, stereo, T_wc, matched_ids, lines=lines,
                                  line_matched=line_matched) if is_kf else None
         timings["keyframe"] = _ms(t0)

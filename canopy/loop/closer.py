@@ -5,6 +5,11 @@ step with local BA, runs detection and verification (``LoopDetector``), and on a
 verified loop optimises the essential graph in SE(3) (``optimise_pose_graph``) over all
 loop edges found so far, returning the per-keyframe corrections that local mapping
 applies to its map.
+
+After a loop it also fuses the duplicated landmarks across the loop (``fuse_across_loop``)
+and marks a full bundle adjustment as pending; ``global_bundle_adjust()`` runs it over all
+keyframes and landmarks of its copy of the map (the actor runs it when no keyframe waits,
+the in-process runner at once).
 """
 from __future__ import annotations
 
@@ -15,10 +20,11 @@ import numpy as np
 
 from canopy.frontend.geometry import rotation_angle, se3_inv
 from canopy.loop.detector import LoopDetector
+from canopy.loop.full_ba import GlobalBAResult, fuse_across_loop, resolve_array, run_ba_job
 from canopy.loop.keyframe import PlaceKeyframe
 from canopy.loop.params import LoopParams
-from canopy.loop.pose_graph import (LOOP, PoseGraphEdge, essential_graph_edges, optimise_pose_graph,
-                                    pose_corrections)
+from canopy.loop.pose_graph import (LOOP, PoseGraphEdge, correct_landmarks, correction_for, essential_graph_edges,
+                                    optimise_pose_graph, pose_corrections)
 from canopy.loop.verify import LoopConstraint
 from shared.types import StereoCalibration
 
@@ -31,6 +37,7 @@ class LoopClosure:
     poses_after: dict[int, np.ndarray]
     pgo_error: tuple[float, float]           # graph error before / after
     timings_ms: dict = field(default_factory=dict)
+    fused: dict[int, int] = field(default_factory=dict)  # duplicate landmark -> kept, across the loop
 
 
 class LoopCloser:
@@ -41,6 +48,28 @@ class LoopCloser:
         self.poses: dict[int, np.ndarray] = {}
         self.loop_edges: list[PoseGraphEdge] = []
         self.closures: list[LoopClosure] = []
+        self.calib = calib
+        # the loop closer's copy of the map points: position as local mapping last sent it,
+        # the keyframe that first saw it (it moves with that keyframe's correction), fusions
+        self.positions: dict[int, np.ndarray] = {}
+        self.landmark_ref: dict[int, int] = {}
+        self.alias: dict[int, int] = {}
+        self.ba_pending = False
+        self.ba_results: list[GlobalBAResult] = []
+        # every answer that moves the map (pose graph, full BA) is an epoch; a keyframe message
+        # sent before local mapping applied epoch e carries poses that are brought up to date
+        self.epoch = 0
+        self.epoch_corrections: dict[int, dict[int, np.ndarray]] = {}
+
+    def _store_landmarks(self, kf: PlaceKeyframe) -> None:
+        P = np.asarray(kf.landmark_positions, float).reshape(-1, 3)
+        if len(P) != len(kf):
+            return
+        lids = resolve_array(kf.landmark_ids, self.alias)
+        ok = np.flatnonzero((lids >= 0) & np.isfinite(P).all(axis=1))
+        for i, lid in zip(ok.tolist(), lids[ok].tolist()):
+            self.positions[lid] = P[i].copy()
+            self.landmark_ref.setdefault(lid, kf.index)
 
     def path_length(self, a: int, b: int) -> float:
         """Distance travelled between keyframes ``a`` and ``b`` along the keyframe sequence."""
@@ -68,12 +97,38 @@ class LoopCloser:
     def n_loops(self) -> int:
         return len(self.closures)
 
-    def add_keyframe(self, kf: PlaceKeyframe, window_poses: dict[int, np.ndarray] | None = None) -> LoopClosure | None:
+    def _catch_up(self, kf: PlaceKeyframe, window_poses: dict, epoch: int) -> dict:
+        """Poses and landmark positions local mapping sent before it applied this closer's
+        latest corrections, moved by them (each keyframe by its own or nearest older one's)."""
+        from canopy.loop.mapping_hooks import catch_up_pose
+
+        kf.T_world_cam = catch_up_pose(kf.index, kf.T_world_cam, self.epoch_corrections, epoch, self.epoch)
+        window_poses = {k: catch_up_pose(int(k), T, self.epoch_corrections, epoch, self.epoch)
+                        for k, T in window_poses.items()}
+        P = np.asarray(kf.landmark_positions, float).reshape(-1, 3)
+        if len(P) == len(kf):
+            ref = np.array([self.landmark_ref.get(int(l), kf.index) for l in np.asarray(kf.landmark_ids).tolist()])
+            for e in range(epoch + 1, self.epoch + 1):
+                P = correct_landmarks(P, ref, self.epoch_corrections.get(e, {}))
+            kf.landmark_positions = P
+        return window_poses
+
+    def _new_epoch(self, corrections: dict[int, np.ndarray]) -> None:
+        self.epoch += 1
+        self.epoch_corrections[self.epoch] = corrections
+
+    def add_keyframe(self, kf: PlaceKeyframe, window_poses: dict[int, np.ndarray] | None = None,
+                     epoch: int | None = None) -> LoopClosure | None:
+        """``epoch``: the corrections local mapping had applied when it sent ``kf`` (None: all)."""
         t0 = time.perf_counter()
-        for k, T in (window_poses or {}).items():
+        window_poses = dict(window_poses or {})
+        if epoch is not None and epoch < self.epoch:
+            window_poses = self._catch_up(kf, window_poses, epoch)
+        for k, T in window_poses.items():
             if k in self.poses:
                 self.poses[int(k)] = np.asarray(T, float)
         self.poses[kf.index] = np.asarray(kf.T_world_cam, float)
+        self._store_landmarks(kf)
         constraint = self.detector.add_keyframe(kf)
         t_detect = (time.perf_counter() - t0) * 1e3
         if constraint is None:
@@ -87,9 +142,15 @@ class LoopCloser:
                                       self.params.essential_min_shared)
         after, corrections, errors = self.optimise(before, edges, fixed=order[0])
         self.poses = {k: T.copy() for k, T in after.items()}
+        self._new_epoch(corrections)
+        self._correct_positions(corrections)
+        t2 = time.perf_counter()
+        fused = self._fuse(constraint) if self.params.fuse else {}
         closure = LoopClosure(constraint, corrections, before, after, errors,
-                              {"detect": t_detect, "pose_graph": (time.perf_counter() - t1) * 1e3})
+                              {"detect": t_detect, "pose_graph": (t2 - t1) * 1e3,
+                               "fuse": (time.perf_counter() - t2) * 1e3}, fused)
         self.closures.append(closure)
+        self.ba_pending = self.params.full_ba
         return closure
 
     def loop_measurement(self, constraint: LoopConstraint) -> np.ndarray:
@@ -100,3 +161,58 @@ class LoopCloser:
         """SE(3) pose graph: (poses after, per-keyframe corrections, (error before, after))."""
         result = optimise_pose_graph(before, edges, self.params, fixed=fixed)
         return result.poses, pose_corrections(before, result.poses), (result.initial_error, result.final_error)
+
+    def _correct_positions(self, corrections: dict[int, np.ndarray]) -> None:
+        """Landmarks move rigidly with the keyframe that first saw them (ORB-SLAM CorrectLoop)."""
+        if not self.positions:
+            return
+        ids = list(self.positions)
+        P = np.array([self.positions[i] for i in ids], float)
+        ref = np.array([self.landmark_ref.get(i, min(self.poses)) for i in ids], np.int64)
+        P = correct_landmarks(P, ref, corrections)
+        self.positions = {i: P[j] for j, i in enumerate(ids)}
+
+    def _fuse(self, c: LoopConstraint) -> dict[int, int]:
+        """Merge the duplicates of the same trees seen at both ends of the loop."""
+        cov = self.detector.covisibility
+        p = self.params
+        query_side = [c.query] + cov.best(c.query, p.fuse_neighbours, p.covisibility_min_shared)
+        cand_side = [c.candidate] + cov.best(c.candidate, p.fuse_neighbours, p.covisibility_min_shared)
+        cand_side = [k for k in cand_side if k not in set(query_side)]
+        fused = fuse_across_loop(self.detector.keyframes, self.poses, self.positions, query_side, cand_side,
+                                 self.calib, p, self.alias)
+        for drop in fused:
+            self.positions.pop(drop, None)
+        return fused
+
+    def ba_job(self) -> dict | None:
+        """What a full BA needs, as a snapshot (it may run in another process while this closer
+        goes on taking keyframes); None when there is nothing to adjust."""
+        self.ba_pending = False
+        if len(self.poses) < 2:
+            return None
+        return {"keyframes": dict(self.detector.keyframes), "poses": {k: T.copy() for k, T in self.poses.items()},
+                "positions": dict(self.positions), "calib": self.calib, "params": self.params,
+                "alias": dict(self.alias), "fixed": min(self.poses), "epoch": self.epoch}
+
+    def accept_ba(self, result: GlobalBAResult) -> GlobalBAResult:
+        """Take a full BA's answer into this closer's map: keyframes move by its corrections
+        (those added since it started with the nearest older one), its landmarks take its
+        positions, the others move with their reference keyframe; a new epoch."""
+        for k in list(self.poses):
+            self.poses[k] = correction_for(int(k), result.corrections) @ self.poses[k]
+        self._correct_positions(result.corrections)
+        for lid, P in zip(result.landmark_ids.tolist(), result.positions):
+            if lid in self.positions:
+                self.positions[lid] = P.copy()
+        self._new_epoch(result.corrections)
+        self.ba_results.append(result)
+        return result
+
+    def global_bundle_adjust(self, on_iteration=None) -> GlobalBAResult | None:
+        """Full BA over every keyframe and landmark of the loop closer's map (AGRI §3.4.2), at
+        once (the in-process runner); returns the result for local mapping."""
+        job = self.ba_job()
+        if job is None:
+            return None
+        return self.accept_ba(run_ba_job(job, on_iteration))

@@ -31,6 +31,9 @@ class PlaceKeyframe:
     word_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (N,) vocabulary word per keypoint
     line_bow: Bow = field(default_factory=dict)
     stats: FeatureStats = field(default_factory=FeatureStats)
+    # (N,3) world position of the landmark each keypoint observes (NaN: none), as local
+    # mapping has it when it sends the keyframe: the starting point of the full BA
+    landmark_positions: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
     def __len__(self) -> int:
         return len(self.uv)

@@ -6,7 +6,8 @@ import time
 
 import numpy as np
 
-from canopy.loop.correction import apply_loop_correction, corrections_from_arrays, refresh_update
+from canopy.loop.correction import (apply_global_ba, apply_loop_correction, corrections_from_arrays, fuse_landmarks,
+                                    refresh_update)
 from protocol.messages import KeyframeData, LocalMapUpdate, LoopKeyframe, LoopResult
 
 
@@ -14,7 +15,7 @@ def loop_keyframe_message(kf: KeyframeData, mapper, update: LocalMapUpdate) -> L
     """The inserted keyframe as the loop closer needs it: tracking's keypoints with the
     landmarks the map assigned to them, its pose after local BA, and the window poses."""
     rec = mapper.keyframes[kf.index]
-    return LoopKeyframe(index=int(kf.index), timestamp=float(kf.timestamp), T_world_cam=rec.T_world_cam.copy(),
+    return LoopKeyframe(landmark_positions=landmark_positions(mapper, rec.landmark), index=int(kf.index), timestamp=float(kf.timestamp), T_world_cam=rec.T_world_cam.copy(),
                         uv=np.asarray(kf.uv, np.float32), u_right=np.asarray(kf.u_right, np.float32),
                         depth=np.asarray(kf.depth, np.float32), octave=np.asarray(kf.octave, np.int32),
                         descriptors=np.asarray(kf.descriptors, np.uint8), landmark_ids=np.asarray(rec.landmark, np.int64),
@@ -23,14 +24,43 @@ def loop_keyframe_message(kf: KeyframeData, mapper, update: LocalMapUpdate) -> L
                         sent_at=time.time())
 
 
-def apply_loop_result(mapper, result: LoopResult, update: LocalMapUpdate | None) -> bool:
-    """Correct the map after a closed loop and refresh ``update`` (the local map tracking
-    will get) from it. Returns whether anything changed."""
-    if not result.closed or len(result.keyframe_ids) == 0:
+def landmark_positions(mapper, landmark_ids: np.ndarray) -> np.ndarray:
+    """(N,3) world positions of the landmarks a keyframe's keypoints observe (NaN: none)."""
+    ids = np.asarray(landmark_ids, np.int64)
+    out = np.full((len(ids), 3), np.nan)
+    for i in np.flatnonzero(ids >= 0).tolist():
+        lm = mapper.landmarks.get(int(ids[i]))
+        if lm is not None:
+            out[i] = lm.position
+    return out
+
+
+def remap_landmarks(kf: KeyframeData, alias: dict[int, int]) -> None:
+    """A keyframe tracked against landmarks since fused: its keypoints observe the kept ones."""
+    if alias and len(kf.landmark_ids):
+        from canopy.loop.full_ba import resolve_array
+        kf.landmark_ids = resolve_array(kf.landmark_ids, alias)
+
+
+def apply_loop_result(mapper, result: LoopResult, update: LocalMapUpdate | None,
+                      alias: dict[int, int] | None = None) -> bool:
+    """Correct the map after a closed loop (pose-graph correction, then landmark fusion) or
+    after a full BA, and refresh ``update`` (the local map tracking will get) from it.
+    Fusions are added to ``alias``. Returns whether anything changed."""
+    if len(result.keyframe_ids) == 0 or not (result.closed or result.global_ba):
         return False
-    apply_loop_correction(mapper, corrections_from_arrays(result.keyframe_ids, result.corrections))
+    corrections = corrections_from_arrays(result.keyframe_ids, result.corrections)
+    if result.global_ba:
+        apply_global_ba(mapper, corrections, result.landmark_ids, result.landmark_positions)
+    else:
+        apply_loop_correction(mapper, corrections)
+    fused = {int(a): int(b) for a, b in np.asarray(result.fused, np.int64).reshape(-1, 2).tolist()}
+    if fused:
+        fuse_landmarks(mapper, fused)
+        if alias is not None:
+            alias.update(fused)
     if update is not None:
-        refresh_update(mapper, update)
+        refresh_update(mapper, update, alias)
     return True
 
 

@@ -105,6 +105,9 @@ class MonoLoopCloser(LoopCloser):
     def __init__(self, calib: StereoCalibration, params: LoopParams | None = None, vocabulary=None,
                  mono: MonoParams | None = None):
         super().__init__(calib, params, vocabulary)
+        # landmark fusion and the full BA after a loop are stereo (rigid corrections, stereo
+        # factors); a monocular map is corrected by similarities only
+        self.params = replace(self.params, fuse=False, full_ba=False)
         self.mono = mono or MonoParams()
         self.detector = MonoLoopDetector(calib, self.params, vocabulary, plausible=self.drift_check, mono=self.mono)
 

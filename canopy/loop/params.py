@@ -73,9 +73,21 @@ class LoopParams:
     pgo_max_iterations: int = 50
     # --- full bundle adjustment after a loop (AGRI §3.4.2) ---------------------------------
     full_ba: bool = True
-    full_ba_iterations: int = 10
+    full_ba_iterations: int = 10          # Levenberg-Marquardt iterations per pass
+    full_ba_passes: int = 2               # robust pass, drop chi2 outliers, refine (ORB-SLAM GBA)
+    full_ba_min_observations: int = 2     # a landmark seen once constrains no pose
+    # landmark fusion across the loop (ORB-SLAM SearchAndFuse): candidate-side landmarks
+    # projected into the query side's keyframes after the correction
+    fuse: bool = True
+    fuse_neighbours: int = 10             # best covisible keyframes on each side of the loop
+    fuse_radius: float = 4.0              # px search window around the projection
+    fuse_max_hamming: int = 50
     # --- relocalisation -------------------------------------------------------------------
     reloc_min_inliers: int = 30
+    reloc_candidates: int = 5             # database candidates tried per frame, best score first
+    # after the motion-model bridge runs out, frames query the database this long before
+    # tracking gives up and starts a new map segment (ORB-SLAM2 never gives up)
+    reloc_max_frames: int = 50
 
     def validate(self) -> "LoopParams":
         def need(ok: bool, name: str, what: str) -> None:
@@ -106,7 +118,15 @@ class LoopParams:
         need(min(self.odometry_sigma_rot, self.odometry_sigma_trans, self.loop_sigma_rot,
                  self.loop_sigma_trans) > 0, "odometry_sigma_rot", "and all pose-graph sigmas must be > 0")
         need(self.robust_kernel_k > 0, "robust_kernel_k", "must be > 0")
+        need(self.full_ba_iterations >= 1 and self.full_ba_passes >= 1, "full_ba_iterations",
+             "and full_ba_passes must be >= 1")
+        need(self.full_ba_min_observations >= 1, "full_ba_min_observations", "must be >= 1")
+        need(self.fuse_neighbours >= 0, "fuse_neighbours", "must be >= 0")
+        need(self.fuse_radius > 0, "fuse_radius", "must be > 0")
+        need(0 < self.fuse_max_hamming <= 256, "fuse_max_hamming", "must be in (0, 256]")
         need(self.reloc_min_inliers >= 4, "reloc_min_inliers", "must be >= 4")
+        need(self.reloc_candidates >= 1, "reloc_candidates", "must be >= 1")
+        need(self.reloc_max_frames >= 0, "reloc_max_frames", "must be >= 0")
         return self
 
     def __post_init__(self):

@@ -15,10 +15,12 @@ import numpy as np
 from canopy.backend import LocalMapper, MappingParams
 from canopy.frontend import STATUS_LOST, Tracker, TrackingParams
 from canopy.loop.closer import LoopCloser, LoopClosure
-from canopy.loop.correction import apply_loop_correction, refresh_update
+from canopy.loop.correction import apply_global_ba, apply_loop_correction, fuse_landmarks, refresh_update
+from canopy.loop.mapping_hooks import landmark_positions, remap_landmarks
 from canopy.loop.database import FeatureStats
 from canopy.loop.keyframe import PlaceKeyframe, with_bow
 from canopy.loop.params import LoopParams
+from canopy.loop.relocalise import PlaceMemory
 from shared.types import Trajectory
 
 
@@ -31,7 +33,8 @@ def place_keyframe_from_map(kf_data, mapper) -> PlaceKeyframe:
                          u_right=np.asarray(kf_data.u_right, np.float64), depth=np.asarray(kf_data.depth, np.float64),
                          octave=np.asarray(kf_data.octave, np.int64), descriptors=np.asarray(kf_data.descriptors, np.uint8),
                          landmark_ids=np.asarray(rec.landmark, np.int64).copy(),
-                         stats=FeatureStats.of(np.zeros((0, 2)), kf_data.line_segments))
+                         stats=FeatureStats.of(np.zeros((0, 2)), kf_data.line_segments),
+                         landmark_positions=landmark_positions(mapper, rec.landmark))
 
 
 @dataclass
@@ -41,6 +44,7 @@ class LoopRunResult:
     statuses: list[str]
     closures: list[LoopClosure] = field(default_factory=list)
     detection: dict = field(default_factory=dict)
+    mapper: object = None        # the final map (for --save-map style snapshots in tests)
 
 
 def run_sequential_with_loops(source, vocabulary, tracking_params: TrackingParams | None = None,
@@ -50,6 +54,8 @@ def run_sequential_with_loops(source, vocabulary, tracking_params: TrackingParam
     tracker = Tracker(calib, tracking_params or TrackingParams())
     mapper = LocalMapper(calib, mapping_params or MappingParams())
     closer = LoopCloser(calib, loop_params or LoopParams(), vocabulary)
+    # as the tracking actor: relocalisation by database query once the motion-model bridge runs out
+    tracker.attach_place_memory(PlaceMemory(calib, closer.params, vocabulary), live=True)
     n = len(source) if max_frames is None else min(len(source), max_frames)
     stamps, statuses, refs, rel, track_poses = [], [], [], [], []
     for i in range(n):
@@ -59,12 +65,18 @@ def run_sequential_with_loops(source, vocabulary, tracking_params: TrackingParam
         statuses.append(res.status)
         track_poses.append(res.T_world_cam.copy())
         if res.is_keyframe and res.keyframe is not None:
+            remap_landmarks(res.keyframe, closer.alias)
             update = mapper.insert_keyframe(res.keyframe)
             kf = with_bow(place_keyframe_from_map(res.keyframe, mapper), vocabulary)
             closure = closer.add_keyframe(kf, update.keyframe_poses)
             if closure is not None:
                 apply_loop_correction(mapper, closure.corrections)
-                refresh_update(mapper, update)
+                fuse_landmarks(mapper, closure.fused)
+                if closer.ba_pending:  # lockstep reference: the full BA at once
+                    ba = closer.global_bundle_adjust()
+                    if ba is not None:
+                        apply_global_ba(mapper, ba.corrections, ba.landmark_ids, ba.positions)
+                refresh_update(mapper, update, closer.alias)
                 if on_closure is not None:
                     on_closure(closure)
             tracker.apply_map_update(update)
@@ -80,4 +92,4 @@ def run_sequential_with_loops(source, vocabulary, tracking_params: TrackingParam
     s = closer.detector.stats
     return LoopRunResult(traj, mapper.keyframe_trajectory(), statuses, closer.closures,
                          {"keyframes": s.keyframes, "queries": s.queries, "candidates": s.candidates,
-                          "consistent": s.consistent, "verified": s.verified, "rejected": dict(s.rejected)})
+                          "consistent": s.consistent, "verified": s.verified, "rejected": dict(s.rejected)}, mapper)

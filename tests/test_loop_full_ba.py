@@ -1,0 +1,181 @@
+"""Full bundle adjustment after a loop and landmark fusion across it (AGRI §3.4.2), on a
+generated lap with exact ground truth: from a map drifted along the lap, the BA with the
+duplicated landmarks at its two ends fused recovers the exact lap, and fusion finds exactly
+those duplicates."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from canopy.frontend.geometry import rotation_angle, se3_exp, se3_inv
+from canopy.loop.full_ba import fuse_across_loop, global_bundle_adjust
+from canopy.loop.keyframe import PlaceKeyframe
+from canopy.loop.params import LoopParams
+from shared.types import StereoCalibration
+
+CALIB = StereoCalibration(fx=450.0, fy=450.0, cx=376.0, cy=240.0, baseline=0.11, width=752, height=480)
+N_KF = 24
+FIRST_LATE = 19        # keyframes from here on see the start again through duplicated landmarks
+
+
+def _look_outward(theta: float, radius: float) -> np.ndarray:
+    """T_world_cam of a camera on a circle, looking radially out (z forward, y down)."""
+    c, s = np.cos(theta), np.sin(theta)
+    z = np.array([c, s, 0.0])
+    y = np.array([0.0, 0.0, -1.0])
+    x = np.cross(y, z)
+    T = np.eye(4)
+    T[:3, :3] = np.stack([x, y, z], axis=1)
+    T[:3, 3] = radius * z
+    return T
+
+
+@pytest.fixture(scope="module")
+def lap():
+    rng = np.random.default_rng(5)
+    gt = {k: _look_outward(2 * np.pi * k / N_KF, 4.0) for k in range(N_KF)}
+    n_pts = 900
+    ang = rng.uniform(0, 2 * np.pi, n_pts)
+    rad = rng.uniform(7.0, 10.0, n_pts)
+    X = np.stack([rad * np.cos(ang), rad * np.sin(ang), rng.uniform(-1.5, 1.5, n_pts)], axis=1)
+    desc = rng.integers(0, 256, (n_pts, 32), dtype=np.uint8)
+    # the map as odometry left it: a drift growing along the lap (k * eps, world frame)
+    eps = np.array([0.0, 0.0, 0.004, 0.01, -0.008, 0.004])
+    drift = {k: se3_exp(k * eps) for k in range(N_KF)}
+    drifted = {k: drift[k] @ gt[k] for k in range(N_KF)}
+    seen = {}
+    for k in range(N_KF):
+        T_cw = se3_inv(gt[k])
+        Pc = X @ T_cw[:3, :3].T + T_cw[:3, 3]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = CALIB.fx * Pc[:, 0] / Pc[:, 2] + CALIB.cx
+            v = CALIB.fy * Pc[:, 1] / Pc[:, 2] + CALIB.cy
+        vis = (Pc[:, 2] > 0.5) & (u > 5) & (u < CALIB.width - 5) & (v > 5) & (v < CALIB.height - 5)
+        seen[k] = (np.flatnonzero(vis), u, v, Pc[:, 2])
+    # landmark ids: physical point j is landmark j, except that late keyframes observe a duplicate
+    # (id 10000 + j) of a point the early part of the lap mapped first
+    first_seen = {}
+    for k in range(N_KF):
+        for j in seen[k][0].tolist():
+            first_seen.setdefault(j, k)
+    duplicated = {j for j, f in first_seen.items() if f < FIRST_LATE and any(j in seen[k][0] for k in range(FIRST_LATE, N_KF))
+                  and not any(j in seen[k][0] for k in range(FIRST_LATE - 4, FIRST_LATE))}
+    keyframes, positions = {}, {}
+    for k in range(N_KF):
+        vis, u, v, z = seen[k]
+        noise = rng.normal(0, 0.3, (len(vis), 3))
+        uv = np.stack([u[vis], v[vis]], axis=1) + noise[:, :2]
+        ur = u[vis] - CALIB.fx * CALIB.baseline / z[vis] + noise[:, 2]
+        ids = np.array([10000 + j if (j in duplicated and k >= FIRST_LATE) else j for j in vis.tolist()], np.int64)
+        d = desc[vis].copy()
+        d[:, 0] ^= rng.integers(0, 4, len(vis), dtype=np.uint8)  # a few bits differ between views
+        keyframes[k] = PlaceKeyframe(index=k, timestamp=float(k), T_world_cam=drifted[k], uv=uv, u_right=ur,
+                                     depth=z[vis], octave=np.zeros(len(vis), np.int64), descriptors=d,
+                                     landmark_ids=ids)
+        for j, lid in zip(vis.tolist(), ids.tolist()):
+            if lid not in positions:  # created by the first keyframe seeing it, in the drifted map
+                positions[lid] = drift[k][:3, :3] @ X[j] + drift[k][:3, 3]
+    return {"gt": gt, "drifted": drifted, "keyframes": keyframes, "positions": positions,
+            "duplicated": duplicated, "X": X}
+
+
+def _max_errors(poses, gt):
+    t = max(np.linalg.norm(poses[k][:3, 3] - gt[k][:3, 3]) for k in gt)
+    r = max(np.degrees(rotation_angle(poses[k][:3, :3].T @ gt[k][:3, :3])) for k in gt)
+    return t, r
+
+
+def test_full_ba_with_fused_duplicates_recovers_the_exact_lap(lap):
+    params = LoopParams()
+    start_t, _ = _max_errors(lap["drifted"], lap["gt"])
+    assert start_t > 0.15  # the lap is open: metres of path, centimetres of drift at its end
+    alone = global_bundle_adjust(lap["keyframes"], lap["drifted"], lap["positions"], CALIB, params, fixed=0)
+    alone_t, _ = _max_errors(alone.poses, lap["gt"])
+    alias = {10000 + j: j for j in lap["duplicated"]}
+    fused = global_bundle_adjust(lap["keyframes"], lap["drifted"], lap["positions"], CALIB, params, alias=alias, fixed=0)
+    fused_t, fused_r = _max_errors(fused.poses, lap["gt"])
+    print(f"start {start_t:.3f} m, BA alone {alone_t:.4f} m, BA fused {fused_t:.4f} m {fused_r:.3f} deg")
+    assert fused_t < 0.5 * alone_t  # the fused duplicates tie the two ends of the lap
+    assert fused_t < 0.03 and fused_r < 0.2   # fused: the exact lap within the noise (0.3 px, 7-10 m depth)
+    P = dict(zip(fused.landmark_ids.tolist(), fused.positions))
+    err = [np.linalg.norm(P[j] - lap["X"][j]) for j in lap["duplicated"] if j in P]
+    assert len(err) > 20 and np.median(err) < 0.02
+    assert all(np.allclose(fused.corrections[k] @ lap["drifted"][k], fused.poses[k]) for k in fused.poses)
+
+
+def test_fusion_finds_the_duplicates_across_the_loop(lap):
+    # after the pose-graph correction the two ends are in place (here: the exact poses)
+    positions = dict(lap["positions"])
+    for j in range(len(lap["X"])):
+        for lid in (j, 10000 + j):
+            if lid in positions:
+                positions[lid] = lap["X"][j]
+    alias: dict[int, int] = {}
+    fused = fuse_across_loop(lap["keyframes"], lap["gt"], positions, list(range(FIRST_LATE, N_KF)),
+                             list(range(0, 5)), CALIB, LoopParams(), alias)
+    truth = {10000 + j: j for j in lap["duplicated"]}
+    assert fused and all(truth.get(d) == k for d, k in fused.items())   # never a wrong pair
+    assert len(fused) >= 0.8 * len(truth)
+    assert alias == fused
+
+
+class _RecordingContext:
+    """The actor's side of the runtime that the full BA uses: what it sends is kept."""
+
+    def __init__(self):
+        self.sent, self.extra = [], {}
+
+    def send(self, target, msg, block=True):
+        self.sent.append((target, msg))
+        return True
+
+    def heartbeat(self):
+        pass
+
+
+def test_loop_closer_actor_runs_the_full_ba_in_a_child_process(lap):
+    from actors.loop_closing import LoopClosingActor
+    from canopy.loop.closer import LoopCloser
+    from canopy.loop.pose_graph import correction_for
+
+    actor = LoopClosingActor({}, seed=0)
+    actor.closer = LoopCloser(CALIB, LoopParams(), None)
+    actor._ba = None
+    actor.closer.detector.keyframes.update(lap["keyframes"])
+    actor.closer.poses = {k: T.copy() for k, T in lap["drifted"].items()}
+    actor.closer.positions = dict(lap["positions"])
+    actor.closer.alias = {10000 + j: j for j in lap["duplicated"]}
+    actor.closer.ba_pending = True
+    ctx = _RecordingContext()
+    actor._finish_ba(ctx)           # starts the child process and waits for its answer
+    assert actor._ba is None and not actor.closer.ba_pending and actor.closer.epoch == 1
+    answers = [m for _, m in ctx.sent if m.global_ba]
+    assert len(answers) == 1 and "global_ba_error" not in ctx.extra
+    corrections = dict(zip(answers[0].keyframe_ids.tolist(), answers[0].corrections))
+    moved = {k: correction_for(k, corrections) @ T for k, T in lap["drifted"].items()}
+    t, r = _max_errors(moved, lap["gt"])
+    assert t < 0.03 and r < 0.2     # local mapping's drifted map, corrected, is the exact lap
+    assert all(np.allclose(actor.closer.poses[k], moved[k]) for k in moved)
+
+
+def test_fused_landmark_is_merged_in_the_map_and_tracking_sees_the_kept_one():
+    from canopy.backend import LocalMapper
+    from canopy.backend.map_store import Keyframe, Landmark
+    from canopy.loop.correction import fuse_landmarks, refresh_update
+    from protocol.messages import LocalMapUpdate
+
+    m = LocalMapper(CALIB)
+    d = np.arange(3 * 32, dtype=np.uint8).reshape(3, 32)
+    for k, lms in ((0, [1, 2, -1]), (5, [3, 2, 4])):
+        m.keyframes[k] = Keyframe(k, float(k), np.eye(4), np.zeros((3, 2)), np.full(3, -1.0), np.zeros(3, np.int64), d,
+                                  np.array(lms, np.int64), 0, k)
+    for lid, obs in ((1, {0: 0}), (2, {0: 1, 5: 1}), (3, {5: 0}), (4, {5: 2})):
+        m.landmarks[lid] = Landmark(lid, np.full(3, float(lid)), d[0], dict(obs))
+    assert fuse_landmarks(m, {3: 1, 4: 99}) == 1            # 99 does not exist: 4 is left alone
+    assert 3 not in m.landmarks and m.landmarks[1].obs == {0: 0, 5: 0}
+    assert m.keyframes[5].landmark.tolist() == [1, 2, 4]
+    update = LocalMapUpdate(5, np.array([2, 3, 4], np.int64), np.zeros((3, 3)), np.zeros((3, 32), np.uint8))
+    refresh_update(m, update, {3: 1})
+    assert update.landmark_ids.tolist() == [1, 2, 4]        # the duplicate's place taken by the kept landmark
+    assert np.allclose(update.positions, [[1, 1, 1], [2, 2, 2], [4, 4, 4]])
+    assert len(update.descriptors) == 3 and set(update.keyframe_poses) == {0, 5}
