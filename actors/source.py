@@ -72,10 +72,11 @@ class SourceActor(Actor):
         if not self.lockstep and time.monotonic() - self._release_time(i) > self.period:
             ctx.dropped += 1  # too late to be useful: a live camera would have overwritten it
             return None
+        read_at = time.time()  # end-to-end latency (frame read -> pose published) starts here
         frame = self.source.frame(i)
         slot, gen = self.ring.write(frame.index, frame.timestamp, [frame.left, frame.right])
         ctx.send("enhancement", FrameHandle(index=frame.index, timestamp=frame.timestamp, ring=self.ring.name,
-                                            slot=slot, generation=gen, sent_at=time.time()))
+                                            slot=slot, generation=gen, sent_at=time.time(), read_at=read_at))
         self.sent += 1
         ctx.extra["frames_sent"] = self.sent
         self.awaiting = self.lockstep

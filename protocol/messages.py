@@ -79,6 +79,7 @@ class FrameHandle:
     generation: int
     sent_at: float
     info: dict = field(default_factory=dict)
+    read_at: float = 0.0        # wall time the source began reading the frame: end-to-end latency starts here
 
 
 @message("frame_done")
@@ -113,6 +114,7 @@ class FramePose:
     n_lines: int = 0            # left segments detected (0 without --lines)
     n_line_inliers: int = 0     # line matches kept by the pose refinement
     lost_reason: str = ""       # why a "predicted" / "lost" frame has no tracked pose ("" when tracked)
+    frame_read_at: float = 0.0  # FrameHandle.read_at: end-to-end latency = sent_at - frame_read_at
 
 
 @message("map_snapshot")
