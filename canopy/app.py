@@ -107,7 +107,7 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
              inspect: str | None = None, progress: bool = True, preset: str | None = None,
              seed: int = 0, lines: bool | None = None, record: str | None = None,
              inspect_keys: str | None = None, loop: bool | None = None,
-             save_map: str | None = None, sensor: str | None = None) -> RunResult:
+             save_map: str | None = None, sensor: str | None = None, foxglove: str | None = None) -> RunResult:
     if dataset not in DATASETS:
         from shared.errors import ConfigError
         raise ConfigError("--dataset", f"unknown dataset {dataset!r}; choose one of {DATASETS}")
@@ -157,14 +157,31 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
         "config": lambda: to_jsonable(_config_dict(cfg)),
         "stats": lambda: to_jsonable({"tracking": collector.tracking_summary(), "actors": collector.stats_summary()}),
     }
+    live = None
+    if foxglove is not None:  # Foxglove live view (issue 12): serves before any actor starts, fails fast
+        from actors.foxglove_live import start_foxglove
+        try:
+            live = start_foxglove(foxglove, ring_name=rings["enhanced"], run_id=run_id)
+        except Exception:
+            import shutil
+            shutil.rmtree(run_dir, ignore_errors=True)  # no actor started: nothing else to clean
+            raise
+        if progress:
+            import sys
+            print(f"Foxglove: open {live.url} in the Foxglove app (Open connection)", file=sys.stderr)
+    on_event = collector if live is None else (lambda msg: (collector(msg), live(msg)))
     supervisor = Supervisor(
         specs, [RingSpec(rings["raw"], cfg.runtime.ring_slots, calib.height, calib.width),
                 RingSpec(rings["enhanced"], cfg.runtime.ring_slots, calib.height, calib.width)],
-        source="source", on_event=collector, heartbeat_timeout_s=cfg.runtime.heartbeat_timeout_s,
+        source="source", on_event=on_event, heartbeat_timeout_s=cfg.runtime.heartbeat_timeout_s,
         ready_timeout_s=cfg.runtime.ready_timeout_s, grace_s=cfg.runtime.grace_s,
         inspect_endpoint=inspect, run_dir=run_dir, inspect_keys=server_keys, run_start=run_start,
         queries=queries)
-    outcome = supervisor.run()
+    try:
+        outcome = supervisor.run()
+    finally:
+        if live is not None:
+            live.close()
     collector.finish_progress()
     repaired = None
     if record_path and Path(record_path).is_file():
