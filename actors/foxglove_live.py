@@ -26,9 +26,9 @@ from __future__ import annotations
 import time
 from typing import Any
 
-import cv2
 import numpy as np
 
+from actors.frame_preview import RingFrames, jpeg_preview
 from canopy.recording import CAMERA_FRAME, IMAGE_TOPIC, POINTS_TOPIC, POSE_TOPIC, TF_TOPIC, WORLD_FRAME
 from protocol.messages import ActorError, FramePose, LoopResult, MapSnapshot
 from shared.errors import ConfigError
@@ -36,8 +36,6 @@ from shared.geometry import rot_to_quat_wxyz
 
 DEFAULT_ADDRESS = "127.0.0.1:8765"
 EVENTS_TOPIC = "/events"
-IMAGE_MAX_WIDTH = 376           # half a EuRoC frame: enough to see what tracking saw, ~10 kB JPEG
-JPEG_QUALITY = 70
 IMAGE_MIN_PERIOD_S = 0.1        # at most 10 images/s, whatever the frame rate
 MAX_MESSAGE_BACKLOG = 256       # per client; the SDK drops the oldest message of a slow client
 POSED_STATUSES = ("init", "ok", "predicted")
@@ -86,52 +84,6 @@ def _pose_parts(T: np.ndarray):
     q = rot_to_quat_wxyz(T[None, :3, :3])[0]
     return (Vector3(x=float(T[0, 3]), y=float(T[1, 3]), z=float(T[2, 3])),
             Quaternion(x=float(q[1]), y=float(q[2]), z=float(q[3]), w=float(q[0])))
-
-
-def jpeg_preview(image: np.ndarray, max_width: int = IMAGE_MAX_WIDTH, quality: int = JPEG_QUALITY) -> bytes:
-    """Downscaled JPEG of a grey or BGR image (INTER_AREA: no aliasing when shrinking)."""
-    h, w = image.shape[:2]
-    if w > max_width:
-        image = cv2.resize(image, (max_width, max(1, round(h * max_width / w))), interpolation=cv2.INTER_AREA)
-    ok, buf = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
-    if not ok:
-        raise ValueError("JPEG encoding failed")
-    return buf.tobytes()
-
-
-class RingFrames:
-    """The enhanced left image of frame ``index``, read from the frame ring in shared memory
-    (None when the slot was overwritten since: the live view skips that image)."""
-
-    def __init__(self, ring_name: str):
-        self.ring_name = ring_name
-        self.ring = None
-
-    def __call__(self, index: int) -> np.ndarray | None:
-        from shared.ring import FrameRing, SlotOverwritten
-
-        if self.ring is None:
-            try:
-                self.ring = FrameRing.attach(self.ring_name)
-            except Exception:
-                return None
-        hit = np.flatnonzero(self.ring.slots["index"] == index)
-        if not len(hit):
-            return None
-        slot = int(hit[0])
-        generation = int(self.ring.slots["generation"][slot])
-        if generation % 2:  # odd: being written
-            return None
-        try:
-            _, _, images = self.ring.read(slot, generation)
-        except SlotOverwritten:
-            return None
-        return images[0]
-
-    def close(self) -> None:
-        if self.ring is not None:
-            self.ring.close()
-            self.ring = None
 
 
 class FoxgloveLive:

@@ -2,8 +2,12 @@
 
 - **Publish stream** (ZeroMQ XPUB at ``--inspect ENDPOINT``): every actor event as multipart
   ``[kind, payload]``, framed by ``run_start`` / ``run_end`` events that carry the run id.
+  Whole-map snapshots go out as ``map_delta`` (new / moved / removed points) and downscaled
+  JPEG frames (``inspect_frame``) only to clients that ask for them: see
+  ``actors.inspection_stream``.
 - **Requests** (ROUTER at ``request_endpoint(ENDPOINT)``: the next TCP port, or ``<path>.req``
-  for ipc): an ``InspectRequest`` (status, config, stats, stop) gets an ``InspectReply``.
+  for ipc): an ``InspectRequest`` (status, config, stats, map, pause, resume, save_map, stop)
+  gets an ``InspectReply``.
 
 Safety (issue 12):
 - Loopback (127.0.0.0/8, ::1, ipc://) binds with no keys. Any other address needs ZeroMQ CURVE
@@ -28,8 +32,9 @@ from typing import Any, Callable
 
 import zmq
 
+from actors.inspection_stream import InspectStream
 from protocol.codec import decode, encode, registered_kinds
-from protocol.messages import InspectReply, InspectRequest
+from protocol.messages import InspectFrame, InspectReply, InspectRequest
 from shared.errors import ConfigError, ProtocolError
 
 MAX_CLIENT_MESSAGE_BYTES = 4096     # a subscription or request is a few dozen bytes
@@ -39,7 +44,7 @@ MAX_REQUESTS_PER_POLL = 20
 SERVER_SECRET = "server.key_secret"
 SERVER_PUBLIC = "server.key"
 AUTHORIZED_DIR = "authorized"       # public keys (*.key) of allowed clients
-COMMANDS = ("status", "config", "stats", "stop")
+COMMANDS = ("status", "config", "stats", "map", "pause", "resume", "save_map", "stop")
 
 
 @dataclass(frozen=True)
@@ -145,8 +150,9 @@ def check_inspection(endpoint: str, keys_dir: str | None) -> ServerKeys | None:
 class InspectionServer:
     """Owned by the supervisor; ``publish`` events, ``serve`` requests once per loop turn."""
 
-    def __init__(self, zctx: zmq.Context, endpoint: str, keys: ServerKeys | None = None):
+    def __init__(self, zctx: zmq.Context, endpoint: str, keys: ServerKeys | None = None, frames=None):
         self.endpoint = endpoint
+        self.stream = InspectStream(frames)
         self.auth = None
         self.pub = zctx.socket(zmq.XPUB)
         self.rep = zctx.socket(zmq.ROUTER)
@@ -180,6 +186,11 @@ class InspectionServer:
         except zmq.Again:
             pass  # every subscriber's queue is full: it loses this event, the run goes on
 
+    def publish_event(self, msg: Any, payload: bytes) -> None:
+        """An actor event as the stream shows it (map snapshots as deltas, frames on request)."""
+        for kind, body in self.stream.events(msg, payload):
+            self.publish(kind, body)
+
     def serve(self, handler: Callable[[str], tuple[dict, str | None]], run_id: str) -> None:
         """Apply pending subscriptions and answer up to MAX_REQUESTS_PER_POLL requests.
         ``handler(command)`` returns (payload, error or None)."""
@@ -189,6 +200,8 @@ class InspectionServer:
                 topic = frame[1:]
                 if topic in self._allowed:  # anything else is never added to the subscription trie
                     self.pub.setsockopt(zmq.SUBSCRIBE if frame[0] == 1 else zmq.UNSUBSCRIBE, topic)
+                    if frame[0] == 1 and topic == InspectFrame.KIND.encode():
+                        self.stream.frames_wanted = True  # encode JPEGs from now on (rate-capped)
         for _ in range(MAX_REQUESTS_PER_POLL):
             if not self.rep.poll(0):
                 break

@@ -156,6 +156,7 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
                            "frames_total": len(source), "frames_done": len(collector.poses)},
         "config": lambda: to_jsonable(_config_dict(cfg)),
         "stats": lambda: to_jsonable({"tracking": collector.tracking_summary(), "actors": collector.stats_summary()}),
+        "map": lambda: _map_payload(collector.snapshot),
     }
     live = None
     if foxglove is not None:  # Foxglove live view (issue 12): serves before any actor starts, fails fast
@@ -176,7 +177,7 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
         source="source", on_event=on_event, heartbeat_timeout_s=cfg.runtime.heartbeat_timeout_s,
         ready_timeout_s=cfg.runtime.ready_timeout_s, grace_s=cfg.runtime.grace_s,
         inspect_endpoint=inspect, run_dir=run_dir, inspect_keys=server_keys, run_start=run_start,
-        queries=queries)
+        queries=queries, inspect_frames_ring=rings["enhanced"], save_map_dir=str(out_dir))
     try:
         outcome = supervisor.run()
     finally:
@@ -207,6 +208,19 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
     _write_config(out_dir, cfg)
     text = format_summary(summary, outcome.reason, os.cpu_count() or 1)
     return RunResult(outcome=outcome, summary=summary, out_dir=out_dir, text=text)
+
+
+def _map_payload(snap) -> dict:
+    """The ``map`` inspection request: the latest whole map (ids, points, keyframe poses)."""
+    import numpy as np
+
+    from actors.inspection_stream import snapshot_ids
+    if snap is None:
+        return {"point_ids": np.zeros(0, np.int64), "points": np.zeros((0, 3), np.float32),
+                "keyframe_indices": np.zeros(0, np.int64), "keyframe_poses": np.zeros((0, 4, 4))}
+    return {"point_ids": snapshot_ids(snap), "points": np.asarray(snap.points, np.float32),
+            "keyframe_indices": np.asarray(snap.keyframe_indices, np.int64),
+            "keyframe_poses": np.asarray(snap.keyframe_poses, np.float64)}
 
 
 def prepare_out_dir(out_dir: Path) -> Path:
