@@ -200,3 +200,63 @@ def test_remote_pause_map_save_resume_on_a_real_run(tmp_path):
     assert len(held) == res.summary["metrics"]["map_points"]
     frame = next(m for m in watcher.events if isinstance(m, InspectFrame))
     assert cv2.imdecode(np.frombuffer(frame.jpeg, np.uint8), cv2.IMREAD_GRAYSCALE).shape == (frame.height, frame.width)
+
+
+def test_client_count_is_capped_and_a_freed_place_is_taken_again(tmp_path):
+    """A client over the cap is refused by the ZAP handshake (ZMQ reports HANDSHAKE_FAILED_AUTH to
+    it and does not retry by itself); once clients leave, new ones get in."""
+    zctx = zmq.Context()
+    endpoint = f"ipc://{tmp_path}/capped"
+    srv = InspectionServer(zctx, endpoint, max_clients=3)
+    subs: list[zmq.Socket] = []
+
+    def connect() -> zmq.Socket:
+        s = zctx.socket(zmq.SUB)
+        s.setsockopt(zmq.SUBSCRIBE, b"")
+        s.setsockopt(zmq.LINGER, 0)
+        s.connect(endpoint)
+        subs.append(s)
+        return s
+
+    def receiving(socks, seconds=3.0) -> list[bool]:
+        """Which sockets get a message published while we wait (each drained)."""
+        got = [False] * len(socks)
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline and not all(got):
+            srv.serve(lambda c: ({}, None), "run")
+            srv.publish("pose", encode(_pose(1)))
+            for i, s in enumerate(socks):
+                while s.poll(0):
+                    s.recv_multipart()
+                    got[i] = True
+            time.sleep(0.02)
+        return got
+
+    try:
+        first = []
+        for _ in range(3):  # one at a time: each is in before the next knocks
+            first.append(connect())
+            assert receiving([first[-1]])[0]
+        extra = [connect(), connect()]
+        assert receiving(first + extra, 2.0) == [True, True, True, False, False]  # 4th and 5th refused
+        for s in first[:2] + extra:  # two leave: two places for clients that knock again
+            s.close(0)
+            subs.remove(s)
+        # a refused client knocks again, as a real one would (the server may not have seen the two
+        # leave yet when the first knock comes)
+        again = []
+        for _ in range(2):
+            for attempt in range(10):
+                s = connect()
+                if receiving([s], 1.0)[0]:
+                    again.append(s)
+                    break
+                s.close(0)
+                subs.remove(s)
+        assert len(again) == 2 and receiving([first[2]] + again, 5.0) == [True, True, True]
+        assert receiving([connect()], 1.0) == [False]  # full again
+    finally:
+        for s in subs:
+            s.close(0)
+        srv.close()
+        zctx.term()
