@@ -220,3 +220,37 @@ def test_launch_foxglove_serves_a_real_run(tmp_path):
     # the last pose streamed is the last tracked frame's pose as tracked (before final BA)
     last = np.loadtxt(tmp_path / "run" / "trajectory.tum")[-1, 1:4]
     assert np.linalg.norm(pose_position(poses[-1]) - last) < 0.05
+
+
+def _proto_message_fields(schema_name: str) -> set[str]:
+    """Field names of a Foxglove message, read from the SDK's protobuf FileDescriptorSet
+    (FileDescriptorSet.file = 1; FileDescriptorProto package = 2, message_type = 4;
+    DescriptorProto name = 1, field = 2; FieldDescriptorProto name = 1)."""
+    import foxglove.messages
+
+    package, name = schema_name.split(".")
+    data = getattr(foxglove.messages, name).get_schema().data
+    for file in proto_fields(data)[1]:
+        f = proto_fields(file)
+        if f.get(2, [b""])[0].decode() != package:
+            continue
+        for msg in f.get(4, []):
+            m = proto_fields(msg)
+            if m[1][0].decode() == name:
+                return {proto_fields(fd)[1][0].decode() for fd in m.get(2, [])}
+    raise AssertionError(f"{schema_name} not in the SDK's schema")
+
+
+def test_recording_schemas_match_the_sdk():
+    """The .mcap recording writes JSON under hand-written JSON Schemas (canopy.recording) named after
+    Foxglove's; every field they declare must exist under that name in the SDK's own schema, so the
+    recording and the live view show the same messages the same way."""
+    from canopy.recording import SCHEMAS
+
+    checked = 0
+    for name, schema in SCHEMAS.items():
+        if not name.startswith("foxglove."):
+            continue
+        assert set(schema["properties"]) <= _proto_message_fields(name), name
+        checked += 1
+    assert checked >= 4
