@@ -195,6 +195,12 @@ class FoxgloveLive:
         self.server = None
 
 
+def check_foxglove(address: str) -> tuple[str, int]:
+    """Before anything starts: the SDK is installed and the address is a loopback HOST:PORT."""
+    _sdk()
+    return parse_foxglove_address(address)
+
+
 def start_foxglove(address: str, ring_name: str | None = None, run_id: str = "") -> FoxgloveLive:
     """Validate ``--foxglove`` and start serving (before any actor starts: a busy port fails fast)."""
     host, port = parse_foxglove_address(address)

@@ -130,6 +130,9 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
     elif inspect_keys is not None:
         from shared.errors import ConfigError
         raise ConfigError("--inspect-keys", "only applies with --inspect")
+    if foxglove is not None:  # SDK installed, loopback HOST:PORT: checked before any file or process
+        from actors.foxglove_live import check_foxglove
+        check_foxglove(foxglove)
     source = open_source(dataset_kind, path, max_frames=max_frames)  # validates the dataset before any process starts
     calib = source.calibration
     out_dir = prepare_out_dir(Path(out) if out else default_out_dir(dataset))

@@ -254,3 +254,15 @@ def test_recording_schemas_match_the_sdk():
         assert set(schema["properties"]) <= _proto_message_fields(name), name
         checked += 1
     assert checked >= 4
+
+
+def test_launch_refuses_a_bad_foxglove_address_or_a_missing_sdk_in_one_line(capsys, monkeypatch):
+    import launch
+
+    assert launch.main(["--foxglove", "0.0.0.0:8765", "--max-frames", "2", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "loopback" in err[0]
+    monkeypatch.setitem(__import__("sys").modules, "foxglove", None)  # as if the extra were not installed
+    assert launch.main(["--foxglove", "--max-frames", "2", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "pip install" in err[0] and "foxglove" in err[0]
