@@ -320,13 +320,26 @@ def plot(rows: list[dict], path: Path) -> Path:
     return path
 
 
+def _rate(text: str) -> str:
+    if text == "lockstep":
+        return text
+    try:
+        ok = float(text) > 0
+    except ValueError:
+        ok = False
+    if not ok:
+        raise argparse.ArgumentTypeError(f"{text!r}: a rate in Hz > 0, or lockstep")
+    return f"{float(text):g}"
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true",
                     help="both sizes at 10, 30, 60 Hz and lockstep, no enhancement, no lines, no subscribers; "
                          "2 comparison pairs")
     ap.add_argument("--sizes", nargs="+", choices=tuple(SIZES), default=list(SIZES))
-    ap.add_argument("--rates", nargs="+", choices=RATES, default=list(RATES))
+    ap.add_argument("--rates", nargs="+", type=_rate, default=list(RATES),
+                    help="frame rates in Hz (any > 0, e.g. 5 on a slow machine) and/or lockstep")
     ap.add_argument("--enhance", nargs="+", choices=("off", "on"), default=["off", "on"])
     ap.add_argument("--lines", nargs="+", choices=("off", "on"), default=["off", "on"])
     ap.add_argument("--subscribers", nargs="+", type=int, default=[0, 20])
