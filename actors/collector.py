@@ -284,7 +284,11 @@ class RunCollector:
         if not len(e2e):
             return {"n": 0}
         third = max(1, len(e2e) // 3)
-        return {"n": int(len(e2e)), "p50": float(np.percentile(e2e, 50)), "p95": float(np.percentile(e2e, 95)),
+        sent = np.array([p.sent_at for _, p in rows])
+        span = float(sent.max() - sent.min())
+        return {"n": int(len(e2e)),
+                # poses per second while poses flow (a run's wall time also holds actor start-up)
+                "pose_rate_hz": (len(e2e) - 1) / span if span > 0 else None, "p50": float(np.percentile(e2e, 50)), "p95": float(np.percentile(e2e, 95)),
                 "p99": float(np.percentile(e2e, 99)), "max": float(e2e.max()),
                 "first_third_p95": float(np.percentile(e2e[:third], 95)),
                 "last_third_p95": float(np.percentile(e2e[-third:], 95))}
