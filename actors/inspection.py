@@ -250,7 +250,11 @@ class InspectionServer:
 
     def publish_event(self, msg: Any, payload: bytes) -> None:
         """An actor event as the stream shows it (map snapshots as deltas, frames on request)."""
-        for kind, body in self.stream.events(msg, payload):
+        try:
+            out = list(self.stream.events(msg, payload))
+        except Exception:  # a preview or delta that fails must never end the run: send the event as is
+            out = [(msg.KIND, payload)]
+        for kind, body in out:
             self.publish(kind, body)
 
     def serve(self, handler: Callable[[str], tuple[dict, str | None]], run_id: str) -> None:

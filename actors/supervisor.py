@@ -11,8 +11,8 @@ the grace period, so what was computed so far can still be written out.
 
 Every event is also re-published on an optional inspection endpoint
 (multipart ``[kind, payload]``, framed by ``run_start`` / ``run_end``) with a
-request/reply channel beside it (status, config, stats, stop); see
-``actors.inspection`` for its safety rules.
+request/reply channel beside it (status, config, stats, map, pause, resume,
+save_map, stop); see ``actors.inspection`` for its safety rules.
 """
 from __future__ import annotations
 
@@ -40,6 +40,7 @@ from shared.errors import ProtocolError
 from shared.ring import FrameRing, remove_segment
 
 RUN_DIR_PREFIX = "canopy-"
+MAX_SAVED_MAPS = 20           # remote save_map requests per run: a client cannot fill the disk
 OWNER_FILE = "owner"          # "<pid> <process create time>" of the launcher that made the folder
 SHM_PREFIX = "canopy_"        # ring names are canopy_<launcher pid>_<ms>_<raw|enh>
 
@@ -303,6 +304,8 @@ class Supervisor:
         if command == "save_map":
             if not self.save_map_dir:
                 return {}, "'save_map' is not available in this run"
+            if self.maps_requested >= MAX_SAVED_MAPS:
+                return {}, f"at most {MAX_SAVED_MAPS} maps are saved per run"
             self.maps_requested += 1
             path = str(Path(self.save_map_dir) / f"map-{self.maps_requested:03d}.canopy")
             # the answer comes as a map_saved event once local mapping wrote the file

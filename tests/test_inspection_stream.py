@@ -260,3 +260,16 @@ def test_client_count_is_capped_and_a_freed_place_is_taken_again(tmp_path):
             s.close(0)
         srv.close()
         zctx.term()
+
+
+def test_control_requests_say_why_they_cannot_be_done(tmp_path):
+    from actors.supervisor import MAX_SAVED_MAPS, Supervisor
+
+    sup = Supervisor([], [], source="source", on_event=lambda m: None, save_map_dir=str(tmp_path))
+    payload, error = sup._answer("pause")
+    assert payload == {} and "'source' is not running" in error
+    assert "'local_mapping' is not running" in sup._answer("save_map")[1]
+    sup.maps_requested = MAX_SAVED_MAPS  # a client cannot fill the disk with maps
+    assert f"at most {MAX_SAVED_MAPS}" in sup._answer("save_map")[1]
+    no_dir = Supervisor([], [], source="source", on_event=lambda m: None)
+    assert "not available" in no_dir._answer("save_map")[1]
