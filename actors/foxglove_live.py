@@ -130,8 +130,11 @@ class FoxgloveLive:
                             f"({msg.n_inliers} inliers, {msg.loops} so far)")
             elif isinstance(msg, ActorError):
                 self._event(f"{msg.actor}: {msg.error}", error=True)
-        except Exception as exc:  # a viewer must never cost the run: report once per kind and go on
-            self._event(f"live view: {type(msg).__name__} not shown ({type(exc).__name__}: {exc})", error=True)
+        except Exception as exc:  # a viewer must never cost the run: say so on /events and go on
+            try:
+                self._event(f"live view: {type(msg).__name__} not shown ({type(exc).__name__}: {exc})", error=True)
+            except Exception:
+                pass
 
     def _pose(self, p: FramePose) -> None:
         from foxglove.messages import FrameTransform, Pose, PoseInFrame

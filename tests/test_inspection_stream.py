@@ -7,7 +7,6 @@ import time
 
 import cv2
 import numpy as np
-import pytest
 import zmq
 
 from actors.inspection import InspectionServer, inspection_request
