@@ -43,6 +43,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+import psutil  # noqa: E402
 import yaml  # noqa: E402
 
 from canopy.app import run_slam  # noqa: E402
@@ -173,6 +174,8 @@ def one_run(dataset: str, rate: str, enhance: bool, lines: bool, subscribers: in
                        "cpu_percent_mean": s["cpu_percent"]["mean"], "peak_rss_mb": s["peak_rss_mb"],
                        "messages": s["messages"]} for a, s in stats.items()},
     })
+    # this process is the launcher (supervisor, collector, inspection endpoint): its RSS after the run
+    row["launcher_rss_mb"] = psutil.Process().memory_info().rss / 2**20
     row["drop_fraction"] = row["frames_dropped"] / max(1, row["frames_total"])
     row["latency_bounded"] = latency_bounded(row)
     return row
