@@ -23,6 +23,7 @@ actor changes and no image crosses ZeroMQ.
 """
 from __future__ import annotations
 
+import logging
 import time
 from typing import Any
 
@@ -39,6 +40,8 @@ EVENTS_TOPIC = "/events"
 IMAGE_MIN_PERIOD_S = 0.1        # at most 10 images/s, whatever the frame rate
 MAX_MESSAGE_BACKLOG = 256       # per client; the SDK drops the oldest message of a slow client
 POSED_STATUSES = ("init", "ok", "predicted")
+CLIENT_LOGGER = "foxglove.websocket.connected_client"  # the SDK logs every bad client message here
+MAX_CLIENT_LOG_RECORDS = 10     # then silence: a client sending garbage must not flood the launcher's log
 INSTALL_HINT = "pip install 'canopy-slam[foxglove]' (or pip install foxglove-sdk)"
 
 
@@ -86,6 +89,19 @@ def _pose_parts(T: np.ndarray):
             Quaternion(x=float(q[1]), y=float(q[2]), z=float(q[3]), w=float(q[0])))
 
 
+class _FirstRecordsOnly(logging.Filter):
+    def __init__(self, limit: int):
+        super().__init__()
+        self.limit, self.seen = limit, 0
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        self.seen += 1
+        if self.seen == self.limit:
+            record.msg = f"{record.getMessage()} (further client errors not logged)"
+            record.args = ()
+        return self.seen <= self.limit
+
+
 class FoxgloveLive:
     """A Foxglove WebSocket server fed with run events: call it with every event (``bridge(msg)``)."""
 
@@ -95,6 +111,9 @@ class FoxgloveLive:
                                        PointCloudChannel, PoseInFrameChannel)
 
         self.context = foxglove.Context()  # our own: never mixes with another server in this process
+        client_log = logging.getLogger(CLIENT_LOGGER)
+        if not any(isinstance(f, _FirstRecordsOnly) for f in client_log.filters):
+            client_log.addFilter(_FirstRecordsOnly(MAX_CLIENT_LOG_RECORDS))
         try:
             self.server = foxglove.start_server(name=name, host=host, port=port, context=self.context,
                                                 message_backlog_size=MAX_MESSAGE_BACKLOG)

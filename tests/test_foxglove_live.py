@@ -266,3 +266,39 @@ def test_launch_refuses_a_bad_foxglove_address_or_a_missing_sdk_in_one_line(caps
     assert launch.main(["--foxglove", "--max-frames", "2", "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "pip install" in err[0] and "foxglove" in err[0]
+
+
+def test_garbage_on_the_foxglove_socket_does_not_grow_the_launcher_or_stop_the_view(caplog):
+    """10 000 random messages (text and binary, up to 2 kB) on the WebSocket the launcher exposes:
+    the server drops them (or the connection), its memory stays bounded, other clients are served."""
+    import psutil
+
+    live = FoxgloveLive("127.0.0.1", 0, run_id="fuzz")
+    rss0 = psutil.Process().memory_info().rss
+    rng = np.random.default_rng(3)
+    sent = 0
+    while sent < 10_000:
+        try:
+            with ws_client.connect(f"ws://127.0.0.1:{live.port}", subprotocols=[SUBPROTOCOL]) as bad:
+                while sent < 10_000:
+                    n = int(rng.integers(0, 2048))
+                    bad.send(rng.bytes(n) if rng.random() < 0.5 else rng.bytes(n).hex()[:n])
+                    sent += 1
+        except Exception:
+            sent += 1  # the server closed the connection on garbage: knock again with the rest
+    client = Client(live.port, deadline_s=30)
+    client.start()
+    try:
+        assert client.subscribed.wait(10)
+        assert _wait(lambda: live.pose_channel.has_sinks())
+        live(_pose(1, np.array([1.0, 2.0, 3.0])))
+        assert _wait(lambda: bool(client.received.get(POSE_TOPIC)))
+    finally:
+        client.stop.set()
+        live.close()
+        client.join(5)
+    assert psutil.Process().memory_info().rss - rss0 < 100 * 2**20
+    # the SDK's error per bad message is logged for the first few only
+    from actors.foxglove_live import CLIENT_LOGGER, MAX_CLIENT_LOG_RECORDS
+    logged = [r for r in caplog.records if r.name == CLIENT_LOGGER]
+    assert 1 <= len(logged) <= MAX_CLIENT_LOG_RECORDS
