@@ -11,6 +11,7 @@ topic                         schema                       content
 ``/tf``                       ``foxglove.FrameTransform``  ``world`` -> ``camera`` (same pose)
 ``/camera/left/image``        ``foxglove.CompressedImage`` enhanced left image, downscaled JPEG, <= 10 Hz
 ``/map/points``               ``foxglove.PointCloud``      the map's points (float32 x, y, z) per snapshot
+``/map/lines``                ``foxglove.SceneUpdate``     the map's line segments (with --lines), one LINE_LIST
 ``/events``                   ``foxglove.Log``             run start / end, loops closed, actor errors
 ============================  ===========================  ===========================================
 
@@ -30,12 +31,14 @@ from typing import Any
 import numpy as np
 
 from actors.frame_preview import RingFrames, jpeg_preview
-from canopy.recording import CAMERA_FRAME, IMAGE_TOPIC, POINTS_TOPIC, POSE_TOPIC, TF_TOPIC, WORLD_FRAME
+from canopy.recording import CAMERA_FRAME, IMAGE_TOPIC, LINES_TOPIC, POINTS_TOPIC, POSE_TOPIC, TF_TOPIC, WORLD_FRAME
 from protocol.messages import ActorError, FramePose, LoopResult, MapSnapshot
 from shared.errors import ConfigError
 from shared.geometry import rot_to_quat_wxyz
 
 DEFAULT_ADDRESS = "127.0.0.1:8765"
+LINE_COLOR = (1.0, 0.55, 0.0, 1.0)   # as in the recording (canopy.recording.McapRecorder.add_lines)
+LINE_THICKNESS_PX = 2.0
 EVENTS_TOPIC = "/events"
 IMAGE_MIN_PERIOD_S = 0.1        # at most 10 images/s, whatever the frame rate
 MAX_MESSAGE_BACKLOG = 256       # per client; the SDK drops the oldest message of a slow client
@@ -108,7 +111,7 @@ class FoxgloveLive:
     def __init__(self, host: str, port: int, frames=None, name: str = "canopy-slam", run_id: str = ""):
         foxglove = _sdk()
         from foxglove.channels import (CompressedImageChannel, FrameTransformChannel, LogChannel,
-                                       PointCloudChannel, PoseInFrameChannel)
+                                       PointCloudChannel, PoseInFrameChannel, SceneUpdateChannel)
 
         self.context = foxglove.Context()  # our own: never mixes with another server in this process
         client_log = logging.getLogger(CLIENT_LOGGER)
@@ -125,9 +128,10 @@ class FoxgloveLive:
         self.tf_channel = FrameTransformChannel(TF_TOPIC, context=self.context)
         self.image_channel = CompressedImageChannel(IMAGE_TOPIC, context=self.context)
         self.points_channel = PointCloudChannel(POINTS_TOPIC, context=self.context)
+        self.lines_channel = SceneUpdateChannel(LINES_TOPIC, context=self.context)
         self.events_channel = LogChannel(EVENTS_TOPIC, context=self.context)
         self._last_image_t = -np.inf
-        self.sent = {"poses": 0, "images": 0, "maps": 0, "events": 0}
+        self.sent = {"poses": 0, "images": 0, "maps": 0, "lines": 0, "events": 0}
         self._event(f"run {run_id} started" if run_id else "run started")
 
     @property
@@ -187,6 +191,7 @@ class FoxgloveLive:
     def _map(self, snap: MapSnapshot) -> None:
         from foxglove.messages import PackedElementField, PackedElementFieldNumericType, PointCloud, Pose
 
+        self._lines(snap)
         if not self.points_channel.has_sinks():
             return
         pts = np.ascontiguousarray(np.asarray(snap.points, np.float32).reshape(-1, 3), dtype="<f4")
@@ -198,6 +203,26 @@ class FoxgloveLive:
             point_stride=12, fields=[PackedElementField(name=n, offset=4 * i, type=f32) for i, n in enumerate("xyz")],
             data=pts.tobytes()))
         self.sent["maps"] += 1
+
+    def _lines(self, snap: MapSnapshot) -> None:
+        from foxglove.messages import (Color, LinePrimitive, LinePrimitiveLineType, Point3, Pose, SceneEntity,
+                                       SceneUpdate)
+
+        seg = np.asarray(snap.lines, np.float64).reshape(-1, 2, 3)
+        seg = seg[np.isfinite(seg).all(axis=(1, 2))]
+        if not len(seg) or not self.lines_channel.has_sinks():
+            return
+        stamp = _stamp(float(snap.keyframe_stamps[-1]) if len(snap.keyframe_stamps) else 0.0)
+        position, orientation = _pose_parts(np.eye(4))
+        r, g, b, a = LINE_COLOR
+        line = LinePrimitive(type=LinePrimitiveLineType.LineList, pose=Pose(position=position, orientation=orientation),
+                             thickness=LINE_THICKNESS_PX, scale_invariant=True,
+                             points=[Point3(x=x, y=y, z=z) for x, y, z in seg.reshape(-1, 3).tolist()],
+                             color=Color(r=r, g=g, b=b, a=a))
+        # a fixed entity id: each update replaces the previous map's lines
+        self.lines_channel.log(SceneUpdate(entities=[SceneEntity(timestamp=stamp, frame_id=WORLD_FRAME, id="map_lines",
+                                                                 lines=[line])]))
+        self.sent["lines"] += 1
 
     def _event(self, text: str, error: bool = False) -> None:
         from foxglove.messages import Log, LogLevel

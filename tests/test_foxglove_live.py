@@ -19,7 +19,7 @@ ws_client = pytest.importorskip("websockets.sync.client",
                                 reason="websockets not installed: pip install '.[foxglove]' (part of .[test])")
 
 from actors.foxglove_live import EVENTS_TOPIC, FoxgloveLive, parse_foxglove_address  # noqa: E402
-from canopy.recording import IMAGE_TOPIC, POINTS_TOPIC, POSE_TOPIC, TF_TOPIC  # noqa: E402
+from canopy.recording import IMAGE_TOPIC, LINES_TOPIC, POINTS_TOPIC, POSE_TOPIC, TF_TOPIC  # noqa: E402
 from protocol.messages import FramePose, LoopResult, MapSnapshot  # noqa: E402
 from shared.errors import ConfigError  # noqa: E402
 
@@ -153,10 +153,12 @@ def test_client_receives_pose_image_map_and_loop_event():
         live(_pose(0, np.array([1.0, 2.0, 3.0]), status="lost"))  # a lost frame has no pose: not sent
         live(_pose(1, np.array([0.5, -1.25, 4.0])))
         points = rng.normal(size=(321, 3)).astype(np.float32)
+        segments = np.array([[[0, 0, 1], [1, 0, 1]], [[0, 1, 2], [0, 2, 2.5]]], np.float32)
         live(MapSnapshot(keyframe_indices=np.array([0]), keyframe_stamps=np.array([100.0]),
-                         keyframe_poses=np.eye(4)[None], points=points))
+                         keyframe_poses=np.eye(4)[None], points=points, lines=segments))
         live(LoopResult(keyframe_index=40, closed=True, candidate=3, n_inliers=77, loops=1))
-        assert _wait(lambda: all(client.received.get(t) for t in (POSE_TOPIC, TF_TOPIC, IMAGE_TOPIC, POINTS_TOPIC))
+        assert _wait(lambda: all(client.received.get(t) for t in (POSE_TOPIC, TF_TOPIC, IMAGE_TOPIC, POINTS_TOPIC,
+                                                                   LINES_TOPIC))
                      and len(client.received.get(EVENTS_TOPIC, [])) >= 1)
     finally:
         client.stop.set()
@@ -167,6 +169,7 @@ def test_client_receives_pose_image_map_and_loop_event():
     assert client.schemas[IMAGE_TOPIC] == "foxglove.CompressedImage"
     assert client.schemas[POINTS_TOPIC] == "foxglove.PointCloud"
     assert client.schemas[EVENTS_TOPIC] == "foxglove.Log"
+    assert client.schemas[LINES_TOPIC] == "foxglove.SceneUpdate"
     # one pose (the lost frame was skipped), with the position that was sent
     assert len(client.received[POSE_TOPIC]) == 1
     np.testing.assert_allclose(pose_position(client.received[POSE_TOPIC][0]), [0.5, -1.25, 4.0])
@@ -181,6 +184,14 @@ def test_client_receives_pose_image_map_and_loop_event():
             if isinstance(v[0], bytes) and len(v[0]) == points.nbytes]
     assert data and np.array_equal(np.frombuffer(data[0][0], "<f4").reshape(-1, 3), points)
     assert any(b"loop closed: keyframe 40 <-> 3" in e for e in client.received[EVENTS_TOPIC])
+    # the lines: SceneUpdate.entities -> SceneEntity.lines -> LinePrimitive.points -> Point3 x, y, z
+    num = {m: proto_field_numbers("foxglove.SceneUpdate", m) for m in ("SceneUpdate", "SceneEntity",
+                                                                      "LinePrimitive", "Point3")}
+    entity = proto_fields(proto_fields(client.received[LINES_TOPIC][0])[num["SceneUpdate"]["entities"]][0])
+    prim = proto_fields(entity[num["SceneEntity"]["lines"]][0])
+    ends = [[proto_fields(p).get(num["Point3"][k], [0.0])[0] for k in "xyz"]
+            for p in prim[num["LinePrimitive"]["points"]]]
+    np.testing.assert_allclose(ends, segments.reshape(-1, 3))
 
 
 def test_address_errors_are_one_line():
@@ -222,13 +233,15 @@ def test_launch_foxglove_serves_a_real_run(tmp_path):
     assert np.linalg.norm(pose_position(poses[-1]) - last) < 0.05
 
 
-def _proto_message_fields(schema_name: str) -> set[str]:
-    """Field names of a Foxglove message, read from the SDK's protobuf FileDescriptorSet
-    (FileDescriptorSet.file = 1; FileDescriptorProto package = 2, message_type = 4;
-    DescriptorProto name = 1, field = 2; FieldDescriptorProto name = 1)."""
+def proto_field_numbers(schema_name: str, message: str | None = None) -> dict[str, int]:
+    """{field name: number} of a Foxglove message (``message``, default the schema's own), read
+    from the SDK's protobuf FileDescriptorSet of ``schema_name`` (FileDescriptorSet.file = 1;
+    FileDescriptorProto package = 2, message_type = 4; DescriptorProto name = 1, field = 2;
+    FieldDescriptorProto name = 1, number = 3)."""
     import foxglove.messages
 
     package, name = schema_name.split(".")
+    message = message or name
     data = getattr(foxglove.messages, name).get_schema().data
     for file in proto_fields(data)[1]:
         f = proto_fields(file)
@@ -236,9 +249,9 @@ def _proto_message_fields(schema_name: str) -> set[str]:
             continue
         for msg in f.get(4, []):
             m = proto_fields(msg)
-            if m[1][0].decode() == name:
-                return {proto_fields(fd)[1][0].decode() for fd in m.get(2, [])}
-    raise AssertionError(f"{schema_name} not in the SDK's schema")
+            if m[1][0].decode() == message:
+                return {proto_fields(fd)[1][0].decode(): proto_fields(fd)[3][0] for fd in m.get(2, [])}
+    raise AssertionError(f"{package}.{message} not in the SDK's schema {schema_name}")
 
 
 def test_recording_schemas_match_the_sdk():
@@ -251,7 +264,7 @@ def test_recording_schemas_match_the_sdk():
     for name, schema in SCHEMAS.items():
         if not name.startswith("foxglove."):
             continue
-        assert set(schema["properties"]) <= _proto_message_fields(name), name
+        assert set(schema["properties"]) <= set(proto_field_numbers(name)), name
         checked += 1
     assert checked >= 4
 
