@@ -86,6 +86,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--record", nargs="?", const="", default=None, metavar="PATH",
                    help="write an .mcap recording for Foxglove (poses, images, map points and lines); "
                         "without PATH: <out>/run.mcap")
+    p.add_argument("--foxglove", nargs="?", const="127.0.0.1:8765", default=None, metavar="HOST:PORT",
+                   help="serve the run live to the Foxglove app (poses, images, map, events) over its "
+                        "WebSocket protocol; loopback only (default 127.0.0.1:8765); needs the "
+                        "foxglove-sdk package: pip install '.[foxglove]'")
     p.add_argument("--quiet", action="store_true", help="no progress line")
     return p
 
@@ -106,7 +110,7 @@ def main(argv: list[str] | None = None) -> int:
                           progress=not args.quiet, preset=args.preset, seed=args.seed, lines=args.lines,
                           record=args.record, inspect_keys=args.inspect_keys, loop=args.loop,
                           save_map=args.save_map, sensor=args.sensor, load_map=args.load_map,
-                          localize=args.localize)
+                          localize=args.localize, foxglove=args.foxglove)
     except CanopyError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -138,9 +138,11 @@ class ActorRecord:
             return float(np.percentile(a, p)) if len(a) else None
 
         return {"messages": self.messages, "dropped": self.dropped,
-                "service_ms": {"p50": pct(s, 50), "p95": pct(s, 95), "max": float(s.max()) if len(s) else None,
+                "service_ms": {"p50": pct(s, 50), "p95": pct(s, 95), "p99": pct(s, 99),
+                               "max": float(s.max()) if len(s) else None,
                                "mean": float(s.mean()) if len(s) else None},
-                "queue_ms": {"p50": pct(q, 50), "p95": pct(q, 95), "max": float(q.max()) if len(q) else None},
+                "queue_ms": {"p50": pct(q, 50), "p95": pct(q, 95), "p99": pct(q, 99),
+                             "max": float(q.max()) if len(q) else None},
                 # the first sample covers start-up imports; the run's load is the rest
                 "cpu_percent": {"mean": float(cpu[1:].mean()) if len(cpu) > 1 else (float(cpu[0]) if len(cpu) else None),
                                 "max": float(cpu.max()) if len(cpu) else None},
@@ -273,6 +275,24 @@ class RunCollector:
                 "tracking_success_percent": 100.0 * tracked / total if total else 0.0,
                 "coverage_percent": 100.0 * n / total if total else 0.0}
 
+    def latency_summary(self) -> dict:
+        """End-to-end latency, frame read by the source -> pose published by tracking (ms), over the
+        frames in index order; the first and last thirds tell a latency that keeps growing (an actor
+        that cannot keep up) from a steady one (benchmarks/bench_load.py)."""
+        rows = [(i, p) for i, p in sorted(self.poses.items()) if p.frame_read_at > 0 and p.sent_at > 0]
+        e2e = np.array([(p.sent_at - p.frame_read_at) * 1e3 for _, p in rows], np.float64)
+        if not len(e2e):
+            return {"n": 0}
+        third = max(1, len(e2e) // 3)
+        sent = np.array([p.sent_at for _, p in rows])
+        span = float(sent.max() - sent.min())
+        return {"n": int(len(e2e)),
+                # poses per second while poses flow (a run's wall time also holds actor start-up)
+                "pose_rate_hz": (len(e2e) - 1) / span if span > 0 else None, "p50": float(np.percentile(e2e, 50)), "p95": float(np.percentile(e2e, 95)),
+                "p99": float(np.percentile(e2e, 99)), "max": float(e2e.max()),
+                "first_third_p95": float(np.percentile(e2e[:third], 95)),
+                "last_third_p95": float(np.percentile(e2e[-third:], 95))}
+
     def stats_summary(self) -> dict:
         names = sorted(self.actors, key=lambda a: ACTOR_ORDER.index(a) if a in ACTOR_ORDER else 99)
         return {name: self.actors[name].summary() for name in names}
@@ -299,6 +319,7 @@ class RunCollector:
         files["frames"] = str(self.write_frames_csv(out_dir / "frames.csv", run_ended_early=early))
         metrics = evaluate_trajectory(cam, gt) if len(cam) else {"note": "no frame was tracked"}
         metrics["tracking"] = self.tracking_summary(run_ended_early=early)
+        metrics["end_to_end_ms"] = self.latency_summary()
         metrics["map_points"] = int(len(points))
         metrics["map_lines"] = int(len(lines))
         metrics["run"] = run_info

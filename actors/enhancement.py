@@ -70,7 +70,8 @@ class EnhancementActor(Actor):
         info = {k: v for k, v in info.items() if isinstance(v, (int, float, str, bool))}
         info["enhance_ms"] = enhance_ms
         ctx.send("tracking", FrameHandle(index=index, timestamp=stamp, ring=self.out_ring.name, slot=slot,
-                                         generation=gen, sent_at=time.time(), info=info))
+                                         generation=gen, sent_at=time.time(), info=info,
+                                         read_at=handle.read_at))
         return handle.sent_at
 
     def teardown(self, ctx: ActorContext) -> None:

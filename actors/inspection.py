@@ -2,8 +2,12 @@
 
 - **Publish stream** (ZeroMQ XPUB at ``--inspect ENDPOINT``): every actor event as multipart
   ``[kind, payload]``, framed by ``run_start`` / ``run_end`` events that carry the run id.
+  Whole-map snapshots go out as ``map_delta`` (new / moved / removed points) and downscaled
+  JPEG frames (``inspect_frame``) only to clients that ask for them: see
+  ``actors.inspection_stream``.
 - **Requests** (ROUTER at ``request_endpoint(ENDPOINT)``: the next TCP port, or ``<path>.req``
-  for ipc): an ``InspectRequest`` (status, config, stats, stop) gets an ``InspectReply``.
+  for ipc): an ``InspectRequest`` (status, config, stats, map, pause, resume, save_map, stop)
+  gets an ``InspectReply``.
 
 Safety (issue 12):
 - Loopback (127.0.0.0/8, ::1, ipc://) binds with no keys. Any other address needs ZeroMQ CURVE
@@ -15,31 +19,36 @@ Safety (issue 12):
   are handled by hand (``XPUB_MANUAL``) and only the known message kinds are ever subscribed, so
   a client cannot grow the subscription trie; per-client send queues are capped
   (``SNDHWM``: a slow client loses messages, the launcher does not buffer them); at most
-  ``MAX_REQUESTS_PER_POLL`` requests are served per supervisor loop turn.
+  ``MAX_REQUESTS_PER_POLL`` requests are served per supervisor loop turn; at most
+  ``MAX_CLIENTS`` connections per socket (subscribers; request clients): the ZAP handshake
+  (run for every connection, keys or not) refuses the next one until a client leaves.
 """
 from __future__ import annotations
 
 import ipaddress
 import re
 import socket
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
 import zmq
 
+from actors.inspection_stream import InspectStream
 from protocol.codec import decode, encode, registered_kinds
-from protocol.messages import InspectReply, InspectRequest
+from protocol.messages import InspectFrame, InspectReply, InspectRequest
 from shared.errors import ConfigError, ProtocolError
 
 MAX_CLIENT_MESSAGE_BYTES = 4096     # a subscription or request is a few dozen bytes
 PUBLISH_HWM = 100                   # messages queued per subscriber before it loses some
 REPLY_HWM = 100
 MAX_REQUESTS_PER_POLL = 20
+MAX_CLIENTS = 32                    # open connections per socket; the load test uses 20 subscribers
 SERVER_SECRET = "server.key_secret"
 SERVER_PUBLIC = "server.key"
 AUTHORIZED_DIR = "authorized"       # public keys (*.key) of allowed clients
-COMMANDS = ("status", "config", "stats", "stop")
+COMMANDS = ("status", "config", "stats", "map", "pause", "resume", "save_map", "stop")
 
 
 @dataclass(frozen=True)
@@ -142,22 +151,81 @@ def check_inspection(endpoint: str, keys_dir: str | None) -> ServerKeys | None:
     return keys
 
 
+class _OpenConnections:
+    """Open connections of one socket, from its monitor. Used by the ZAP thread alone (the only
+    reader of the monitor socket), when it decides on a new connection."""
+
+    ACCEPT_WAIT_S = 0.2
+
+    def __init__(self, sock: zmq.Socket, cap: int):
+        self.monitor = sock.get_monitor_socket(zmq.EVENT_ACCEPTED | zmq.EVENT_DISCONNECTED)
+        self.cap = cap
+        self.open: set[int] = set()
+        self.asked = 0       # ZAP requests for this socket so far
+        self.accepted = 0    # ACCEPTED events seen so far
+
+    def count(self) -> int:
+        """Open connections, the one being decided included: every ZAP request follows an accept,
+        so wait (briefly) until as many accepts as requests were seen."""
+        from zmq.utils.monitor import recv_monitor_message
+
+        deadline = time.monotonic() + self.ACCEPT_WAIT_S
+        while True:
+            wait_ms = 0 if self.accepted >= self.asked else max(0, int((deadline - time.monotonic()) * 1e3))
+            if not self.monitor.poll(wait_ms):
+                return len(self.open)
+            event = recv_monitor_message(self.monitor)
+            if event["event"] == zmq.EVENT_ACCEPTED:
+                self.accepted += 1
+                self.open.add(event["value"])
+            else:
+                self.open.discard(event["value"])
+
+
+def _capped_authenticator(zctx: zmq.Context, limits: dict[bytes, _OpenConnections]):
+    """pyzmq's ZAP handler (CURVE keys when configured, NULL allowed otherwise) that also refuses a
+    connection when its socket already has ``cap`` open ones."""
+    from zmq.auth.thread import ThreadAuthenticator
+
+    class CappedAuthenticator(ThreadAuthenticator):
+        domain = b""
+
+        async def handle_zap_message(self, msg: list[bytes]) -> None:
+            self.domain = msg[2] if len(msg) > 2 else b""
+            if self.domain in limits:
+                limits[self.domain].asked += 1
+            await super().handle_zap_message(msg)
+
+        def _send_zap_reply(self, request_id, status_code, status_text, user_id="anonymous") -> None:
+            limit = limits.get(self.domain)
+            if status_code == b"200" and limit is not None and limit.count() > limit.cap:
+                status_code, status_text = b"400", b"too many clients"
+            super()._send_zap_reply(request_id, status_code, status_text, user_id)
+
+    return CappedAuthenticator(zctx)
+
+
 class InspectionServer:
     """Owned by the supervisor; ``publish`` events, ``serve`` requests once per loop turn."""
 
-    def __init__(self, zctx: zmq.Context, endpoint: str, keys: ServerKeys | None = None):
+    def __init__(self, zctx: zmq.Context, endpoint: str, keys: ServerKeys | None = None, frames=None,
+                 max_clients: int = MAX_CLIENTS):
         self.endpoint = endpoint
+        self.stream = InspectStream(frames)
         self.auth = None
         self.pub = zctx.socket(zmq.XPUB)
         self.rep = zctx.socket(zmq.ROUTER)
         self._allowed = {k.encode() for k in registered_kinds()} | {b""}
+        self._limits: dict[bytes, _OpenConnections] = {}
         try:
-            if keys is not None:
-                from zmq.auth.thread import ThreadAuthenticator
-
-                self.auth = ThreadAuthenticator(zctx)
-                self.auth.start()
-                self.auth.configure_curve(domain="*", location=str(keys.authorized_dir))
+            for sock, domain in ((self.pub, b"canopy.inspect.pub"), (self.rep, b"canopy.inspect.req")):
+                sock.zap_domain = domain  # makes ZMQ ask the ZAP handler about every connection
+                self._limits[domain] = _OpenConnections(sock, max_clients)
+            self.auth = _capped_authenticator(zctx, self._limits)
+            self.auth.start()
+            if keys is not None:  # pyzmq looks keys up by ZAP domain ("*" only stands for "")
+                for domain in self._limits:
+                    self.auth.configure_curve(domain=domain.decode(), location=str(keys.authorized_dir))
             for sock, hwm in ((self.pub, PUBLISH_HWM), (self.rep, REPLY_HWM)):
                 sock.setsockopt(zmq.MAXMSGSIZE, MAX_CLIENT_MESSAGE_BYTES)
                 sock.setsockopt(zmq.SNDHWM, hwm)
@@ -180,6 +248,15 @@ class InspectionServer:
         except zmq.Again:
             pass  # every subscriber's queue is full: it loses this event, the run goes on
 
+    def publish_event(self, msg: Any, payload: bytes) -> None:
+        """An actor event as the stream shows it (map snapshots as deltas, frames on request)."""
+        try:
+            out = list(self.stream.events(msg, payload))
+        except Exception:  # a preview or delta that fails must never end the run: send the event as is
+            out = [(msg.KIND, payload)]
+        for kind, body in out:
+            self.publish(kind, body)
+
     def serve(self, handler: Callable[[str], tuple[dict, str | None]], run_id: str) -> None:
         """Apply pending subscriptions and answer up to MAX_REQUESTS_PER_POLL requests.
         ``handler(command)`` returns (payload, error or None)."""
@@ -189,6 +266,8 @@ class InspectionServer:
                 topic = frame[1:]
                 if topic in self._allowed:  # anything else is never added to the subscription trie
                     self.pub.setsockopt(zmq.SUBSCRIBE if frame[0] == 1 else zmq.UNSUBSCRIBE, topic)
+                    if frame[0] == 1 and topic == InspectFrame.KIND.encode():
+                        self.stream.frames_wanted = True  # encode JPEGs from now on (rate-capped)
         for _ in range(MAX_REQUESTS_PER_POLL):
             if not self.rep.poll(0):
                 break
@@ -226,6 +305,9 @@ class InspectionServer:
         if self.auth is not None:
             self.auth.stop()
             self.auth = None
+        for limit in self._limits.values():  # after the ZAP thread, the only user of the monitors
+            limit.monitor.close(linger=0)
+        self._limits = {}
 
 
 # -- clients ----------------------------------------------------------------------------------------

@@ -26,7 +26,7 @@ from actors.runtime import Actor, ActorContext
 from canopy.backend import LocalMapper
 from canopy.loop.correction import corrections_from_arrays
 from canopy.loop.mapping_hooks import apply_loop_result, catch_up_pose, loop_keyframe_message, remap_landmarks
-from protocol.messages import EndOfStream, KeyframeData, LoopResult, MapSnapshot
+from protocol.messages import EndOfStream, KeyframeData, LoopResult, MapSaved, MapSnapshot, SaveMapRequest
 
 
 class LocalMappingActor(Actor):
@@ -53,6 +53,17 @@ class LocalMappingActor(Actor):
         self.loop_epoch = 0                      # loop corrections applied to the map
         self.epoch_corrections: dict[int, dict] = {}  # epoch -> keyframe corrections of that loop
         self.landmark_alias: dict[int, int] = {}  # landmarks fused across a loop -> the one kept
+
+    def on_control(self, msg, ctx: ActorContext) -> None:
+        if isinstance(msg, SaveMapRequest):  # a remote client's save_map (actors.inspection)
+            from canopy.loop.map_io import map_from_mapper, save_map
+            try:
+                save_map(msg.path, map_from_mapper(self.mapper, self.config.get("vocabulary_id", "")))
+                saved = MapSaved(path=msg.path, ok=True, keyframes=len(self.mapper.keyframes),
+                                 points=len(self.mapper.landmarks))
+            except Exception as exc:  # a failed save is reported to the client, never ends the run
+                saved = MapSaved(path=msg.path, ok=False, error=f"{type(exc).__name__}: {exc}")
+            ctx.publish(saved)
 
     def on_message(self, msg, ctx: ActorContext) -> None:
         if isinstance(msg, KeyframeData):
@@ -121,7 +132,9 @@ class LocalMappingActor(Actor):
         return MapSnapshot(keyframe_indices=np.asarray(kfs.meta["indices"], np.int64), keyframe_stamps=kfs.stamps,
                            keyframe_poses=kfs.poses,
                            points=np.asarray(self.mapper.map_points(), np.float32).reshape(-1, 3), final=final,
-                           lines=np.asarray(self.mapper.map_lines(), np.float32).reshape(-1, 2, 3))
+                           lines=np.asarray(self.mapper.map_lines(), np.float32).reshape(-1, 2, 3),
+                           # same order as map_points (dict order): inspection clients get map deltas
+                           point_ids=np.fromiter(self.mapper.landmarks.keys(), np.int64, len(self.mapper.landmarks)))
 
     def _publish_snapshot(self, ctx: ActorContext, final: bool) -> None:
         snap = self._snapshot(final=final)

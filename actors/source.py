@@ -12,7 +12,7 @@ import time
 
 from actors.runtime import Actor, ActorContext
 from canopy.sources import open_source
-from protocol.messages import EndOfStream, FrameDone, FrameHandle, Start
+from protocol.messages import EndOfStream, FrameDone, FrameHandle, Pause, Resume, Start
 from shared.ring import FrameRing
 
 
@@ -33,11 +33,19 @@ class SourceActor(Actor):
         self.awaiting = False
         self.t0 = 0.0
         self.sent = 0
+        self.paused_at: float | None = None  # remote pause (inspection request): no frame released
 
     def on_control(self, msg, ctx: ActorContext) -> None:
         if isinstance(msg, Start):
             self.started = True
             self.t0 = time.monotonic()
+        elif isinstance(msg, Pause) and self.paused_at is None:
+            self.paused_at = time.monotonic()
+        elif isinstance(msg, Resume) and self.paused_at is not None:
+            if self.started:  # realtime: the dataset clock skips the pause instead of dropping its frames
+                self.t0 += time.monotonic() - max(self.paused_at, self.t0)
+            self.paused_at = None
+        ctx.extra["paused"] = self.paused_at is not None
 
     def on_message(self, msg, ctx: ActorContext) -> None:
         if isinstance(msg, FrameDone):
@@ -50,7 +58,7 @@ class SourceActor(Actor):
         return self.next_index > len(self.source)
 
     def next_tick_s(self) -> float | None:
-        if not self.started or self._finished():
+        if not self.started or self._finished() or self.paused_at is not None:
             return None
         if self.lockstep:
             return None if self.awaiting else 0.0
@@ -72,10 +80,11 @@ class SourceActor(Actor):
         if not self.lockstep and time.monotonic() - self._release_time(i) > self.period:
             ctx.dropped += 1  # too late to be useful: a live camera would have overwritten it
             return None
+        read_at = time.time()  # end-to-end latency (frame read -> pose published) starts here
         frame = self.source.frame(i)
         slot, gen = self.ring.write(frame.index, frame.timestamp, [frame.left, frame.right])
         ctx.send("enhancement", FrameHandle(index=frame.index, timestamp=frame.timestamp, ring=self.ring.name,
-                                            slot=slot, generation=gen, sent_at=time.time()))
+                                            slot=slot, generation=gen, sent_at=time.time(), read_at=read_at))
         self.sent += 1
         ctx.extra["frames_sent"] = self.sent
         self.awaiting = self.lockstep

@@ -11,8 +11,8 @@ the grace period, so what was computed so far can still be written out.
 
 Every event is also re-published on an optional inspection endpoint
 (multipart ``[kind, payload]``, framed by ``run_start`` / ``run_end``) with a
-request/reply channel beside it (status, config, stats, stop); see
-``actors.inspection`` for its safety rules.
+request/reply channel beside it (status, config, stats, map, pause, resume,
+save_map, stop); see ``actors.inspection`` for its safety rules.
 """
 from __future__ import annotations
 
@@ -34,11 +34,13 @@ import zmq
 from actors.inspection import InspectionServer, ServerKeys, inspection_client  # noqa: F401 (re-export)
 from actors.runtime import ActorSpec, actor_main
 from protocol.codec import decode, encode
-from protocol.messages import ActorError, ActorReady, ActorStats, RunEnd, RunStart, Shutdown, Start
+from protocol.messages import (ActorError, ActorReady, ActorStats, Pause, Resume, RunEnd, RunStart, SaveMapRequest,
+                               Shutdown, Start)
 from shared.errors import ProtocolError
 from shared.ring import FrameRing, remove_segment
 
 RUN_DIR_PREFIX = "canopy-"
+MAX_SAVED_MAPS = 20           # remote save_map requests per run: a client cannot fill the disk
 OWNER_FILE = "owner"          # "<pid> <process create time>" of the launcher that made the folder
 SHM_PREFIX = "canopy_"        # ring names are canopy_<launcher pid>_<ms>_<raw|enh>
 
@@ -117,7 +119,8 @@ class Supervisor:
                  ready_timeout_s: float = 60.0, grace_s: float = 1.0,
                  inspect_endpoint: str | None = None, run_dir: str | None = None,
                  inspect_keys: ServerKeys | None = None, run_start: RunStart | None = None,
-                 queries: dict[str, Callable[[], dict]] | None = None):
+                 queries: dict[str, Callable[[], dict]] | None = None,
+                 inspect_frames_ring: str | None = None, save_map_dir: str | None = None):
         self.specs = actors
         self.ring_specs = rings
         self.source = source
@@ -137,6 +140,11 @@ class Supervisor:
         self.queries = dict(queries or {})
         self.stop_requested: str | None = None
         self._t_start = time.monotonic()
+        self.inspect_frames_ring = inspect_frames_ring  # enhanced ring: JPEG previews for clients
+        self.save_map_dir = save_map_dir                # where a remote save_map request writes
+        self.paused = False
+        self.maps_requested = 0
+        self._controls: dict[str, zmq.Socket] = {}
 
     # -- wiring helpers -----------------------------------------------------------------
     @staticmethod
@@ -162,6 +170,8 @@ class Supervisor:
         events = zctx.socket(zmq.PULL)
         inspect = None
         controls: dict[str, zmq.Socket] = {}
+        self._controls = controls  # remote pause / resume / save_map requests send on these
+        frames = None
         old_term = signal.getsignal(signal.SIGTERM)
 
         def on_term(signum, frame):
@@ -171,7 +181,10 @@ class Supervisor:
         try:
             events.bind(self.specs[0].events)
             if self.inspect_endpoint:
-                inspect = InspectionServer(zctx, self.inspect_endpoint, self.inspect_keys)
+                if self.inspect_frames_ring:
+                    from actors.frame_preview import RingFrames
+                    frames = RingFrames(self.inspect_frames_ring)
+                inspect = InspectionServer(zctx, self.inspect_endpoint, self.inspect_keys, frames=frames)
                 if self.run_start is not None:
                     inspect.publish(RunStart.KIND, encode(self.run_start))
             for rs in self.ring_specs:
@@ -202,6 +215,8 @@ class Supervisor:
                                                            reason=outcome.reason or "run finished",
                                                            wall_s=time.monotonic() - t_start)))
                 inspect.close()  # lingers 0.5 s so run_end reaches connected clients
+            if frames is not None:
+                frames.close()
             for sock in [events, *controls.values()]:
                 sock.close(linger=0)
             zctx.term()
@@ -223,7 +238,7 @@ class Supervisor:
         # remote client holding a pose that the run's own outputs do not have.
         self.on_event(msg)
         if inspect is not None:
-            inspect.publish(msg.KIND, payload)
+            inspect.publish_event(msg, payload)
         return msg
 
     def _drain(self, events, inspect) -> None:
@@ -283,8 +298,20 @@ class Supervisor:
         if command == "stop":
             self.stop_requested = "stopped by a remote client"
             return {"stopping": True}, None
+        if command in ("pause", "resume"):
+            return self._control("source", Pause() if command == "pause" else Resume(),
+                                 {"paused": command == "pause"}, lambda: setattr(self, "paused", command == "pause"))
+        if command == "save_map":
+            if not self.save_map_dir:
+                return {}, "'save_map' is not available in this run"
+            if self.maps_requested >= MAX_SAVED_MAPS:
+                return {}, f"at most {MAX_SAVED_MAPS} maps are saved per run"
+            self.maps_requested += 1
+            path = str(Path(self.save_map_dir) / f"map-{self.maps_requested:03d}.canopy")
+            # the answer comes as a map_saved event once local mapping wrote the file
+            return self._control("local_mapping", SaveMapRequest(path=path), {"path": path, "event": "map_saved"})
         if command == "status":
-            base = {"run_id": self.run_id, "uptime_s": time.monotonic() - self._t_start,
+            base = {"run_id": self.run_id, "paused": self.paused, "uptime_s": time.monotonic() - self._t_start,
                     "actors": {n: ("finished" if n in self.finished else
                                    "alive" if p.is_alive() else _signal_name(p.exitcode))
                                for n, p in self.procs.items()}}
@@ -294,6 +321,18 @@ class Supervisor:
         if query is None:
             return {}, f"{command!r} is not available in this run"
         return query(), None
+
+    def _control(self, actor: str, msg, payload: dict, on_sent=lambda: None) -> tuple[dict, str | None]:
+        sock = self._controls.get(actor)
+        proc = self.procs.get(actor)
+        if sock is None or proc is None or not proc.is_alive() or actor in self.finished:
+            return {}, f"actor {actor!r} is not running"
+        try:
+            sock.send(encode(msg), zmq.NOBLOCK)
+        except zmq.ZMQError as exc:
+            return {}, f"actor {actor!r} did not take the request: {exc}"
+        on_sent()
+        return payload, None
 
     def _silent_actors(self) -> dict[str, float]:
         """Actors whose last heartbeat is older than the timeout: {name: seconds silent}."""

@@ -135,7 +135,7 @@ class TrackingActor(Actor):
                          T_ref_cam=T_ref_cam, timings_ms=timings, sent_at=time.time(),
                          enhancement={k: v for k, v in handle.info.items() if k != "enhance_ms"},
                          n_lines=int(res.n_lines), n_line_inliers=int(res.n_line_inliers),
-                         lost_reason=res.lost_reason)
+                         lost_reason=res.lost_reason, frame_read_at=handle.read_at)
         for reason, n in res.line_rejected.items():  # degenerate segments, counted never fatal
             self.counts[f"lines_rejected_{reason}"] = self.counts.get(f"lines_rejected_{reason}", 0) + n
         ctx.publish(pose)

@@ -114,7 +114,7 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
              seed: int = 0, lines: bool | None = None, record: str | None = None,
              inspect_keys: str | None = None, loop: bool | None = None,
              save_map: str | None = None, sensor: str | None = None, load_map: str | None = None,
-             localize: bool = False) -> RunResult:
+             localize: bool = False, foxglove: str | None = None) -> RunResult:
     if dataset not in DATASETS:
         from shared.errors import ConfigError
         raise ConfigError("--dataset", f"unknown dataset {dataset!r}; choose one of {DATASETS}")
@@ -137,6 +137,9 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
     elif inspect_keys is not None:
         from shared.errors import ConfigError
         raise ConfigError("--inspect-keys", "only applies with --inspect")
+    if foxglove is not None:  # SDK installed, loopback HOST:PORT: checked before any file or process
+        from actors.foxglove_live import check_foxglove
+        check_foxglove(foxglove)
     source = open_source(dataset_kind, path, max_frames=max_frames)  # validates the dataset before any process starts
     calib = source.calibration
     load_map_path = _check_load_map(load_map, localize, calib, cfg)
@@ -165,15 +168,33 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
                            "frames_total": len(source), "frames_done": len(collector.poses)},
         "config": lambda: to_jsonable(_config_dict(cfg)),
         "stats": lambda: to_jsonable({"tracking": collector.tracking_summary(), "actors": collector.stats_summary()}),
+        "map": lambda: _map_payload(collector.snapshot),
     }
+    live = None
+    if foxglove is not None:  # Foxglove live view (issue 12): serves before any actor starts, fails fast
+        from actors.foxglove_live import start_foxglove
+        try:
+            live = start_foxglove(foxglove, ring_name=rings["enhanced"], run_id=run_id)
+        except Exception:
+            import shutil
+            shutil.rmtree(run_dir, ignore_errors=True)  # no actor started: nothing else to clean
+            raise
+        if progress:
+            import sys
+            print(f"Foxglove: open {live.url} in the Foxglove app (Open connection)", file=sys.stderr)
+    on_event = collector if live is None else (lambda msg: (collector(msg), live(msg)))
     supervisor = Supervisor(
         specs, [RingSpec(rings["raw"], cfg.runtime.ring_slots, calib.height, calib.width),
                 RingSpec(rings["enhanced"], cfg.runtime.ring_slots, calib.height, calib.width)],
-        source="source", on_event=collector, heartbeat_timeout_s=cfg.runtime.heartbeat_timeout_s,
+        source="source", on_event=on_event, heartbeat_timeout_s=cfg.runtime.heartbeat_timeout_s,
         ready_timeout_s=cfg.runtime.ready_timeout_s, grace_s=cfg.runtime.grace_s,
         inspect_endpoint=inspect, run_dir=run_dir, inspect_keys=server_keys, run_start=run_start,
-        queries=queries)
-    outcome = supervisor.run()
+        queries=queries, inspect_frames_ring=rings["enhanced"], save_map_dir=str(out_dir))
+    try:
+        outcome = supervisor.run()
+    finally:
+        if live is not None:
+            live.close()
     collector.finish_progress()
     repaired = None
     if record_path and Path(record_path).is_file():
@@ -218,6 +239,19 @@ def _check_load_map(load_map: str | None, localize: bool, calib, cfg) -> str | N
     from canopy.loop.map_io import load_map as read_map
     read_map(load_map, calib)  # InputError naming the file: missing, not a map, other version or calibration
     return str(Path(load_map).resolve())
+
+
+def _map_payload(snap) -> dict:
+    """The ``map`` inspection request: the latest whole map (ids, points, keyframe poses)."""
+    import numpy as np
+
+    from actors.inspection_stream import snapshot_ids
+    if snap is None:
+        return {"point_ids": np.zeros(0, np.int64), "points": np.zeros((0, 3), np.float32),
+                "keyframe_indices": np.zeros(0, np.int64), "keyframe_poses": np.zeros((0, 4, 4))}
+    return {"point_ids": snapshot_ids(snap), "points": np.asarray(snap.points, np.float32),
+            "keyframe_indices": np.asarray(snap.keyframe_indices, np.int64),
+            "keyframe_poses": np.asarray(snap.keyframe_poses, np.float64)}
 
 
 def prepare_out_dir(out_dir: Path) -> Path:

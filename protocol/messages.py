@@ -79,6 +79,7 @@ class FrameHandle:
     generation: int
     sent_at: float
     info: dict = field(default_factory=dict)
+    read_at: float = 0.0        # wall time the source began reading the frame: end-to-end latency starts here
 
 
 @message("frame_done")
@@ -113,6 +114,7 @@ class FramePose:
     n_lines: int = 0            # left segments detected (0 without --lines)
     n_line_inliers: int = 0     # line matches kept by the pose refinement
     lost_reason: str = ""       # why a "predicted" / "lost" frame has no tracked pose ("" when tracked)
+    frame_read_at: float = 0.0  # FrameHandle.read_at: end-to-end latency = sent_at - frame_read_at
 
 
 @message("map_snapshot")
@@ -125,6 +127,7 @@ class MapSnapshot:
     final: bool = False
     timings_ms: dict = field(default_factory=dict)
     lines: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3), np.float32))  # (L, 2, 3) endpoints
+    point_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (N,) landmark id of each point
 
 
 # --- tracking <-> local mapping --------------------------------------------------
@@ -202,7 +205,8 @@ class LocalMapUpdate:
 # Published on the inspection endpoint next to every actor event, and the request/reply
 # channel beside it (see actors/inspection.py). INSPECT_SCHEMA is bumped on any change here.
 
-INSPECT_SCHEMA = 1
+INSPECT_SCHEMA = 2   # 2: map_delta replaces map_snapshot on the stream; inspect_frame; map, pause, resume,
+                     #    save_map requests; map_saved events; frame read time on poses
 
 
 @message("run_start")
@@ -226,9 +230,63 @@ class RunEnd:
     wall_s: float
 
 
+@message("map_delta")
+class MapDelta:
+    """Launcher → inspection clients, in place of ``map_snapshot``: the map points that are new or
+    moved (by more than a tolerance) since the previous delta, and those removed; applied in
+    ``seq`` order to an empty map they give the current map (the ``map`` request gives it whole).
+    Keyframe poses are few: all of them, every time."""
+    seq: int
+    point_ids: np.ndarray         # (M,) int64, new or moved
+    positions: np.ndarray         # (M, 3) float32
+    removed_ids: np.ndarray       # (R,) int64
+    n_points: int                 # map size once applied
+    keyframe_indices: np.ndarray  # (K,) int64
+    keyframe_poses: np.ndarray    # (K, 4, 4) T_world_cam
+    final: bool = False
+
+
+@message("inspect_frame")
+class InspectFrame:
+    """Launcher → inspection clients that subscribed to ``inspect_frame`` by name: a downscaled
+    JPEG of the enhanced left image tracking used, at a capped rate."""
+    index: int
+    timestamp: float
+    jpeg: bytes
+    width: int
+    height: int
+
+
+@message("pause")
+class Pause:
+    """Supervisor → source: release no frame until ``resume``."""
+
+
+@message("resume")
+class Resume:
+    """Supervisor → source: release frames again (realtime: the clock skips the pause)."""
+
+
+@message("save_map_request")
+class SaveMapRequest:
+    """Supervisor → local mapping: write the map as it is now to ``path`` (canopy.loop.map_io)."""
+    path: str
+
+
+@message("map_saved")
+class MapSaved:
+    """Local mapping → supervisor (and inspection clients): the outcome of a ``save_map`` request."""
+    path: str
+    ok: bool
+    keyframes: int = 0
+    points: int = 0
+    error: str = ""
+
+
 @message("inspect_request")
 class InspectRequest:
-    """Client → launcher: ``command`` is one of status, config, stats, stop."""
+    """Client → launcher: ``command`` is one of status, config, stats, map, pause, resume,
+    save_map, stop (actors.inspection.COMMANDS)."""
     command: str
     request_id: int = 0
 

@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from actors.inspection import inspection_client, inspection_request, load_client_keys  # noqa: E402
 from canopy.report import to_jsonable  # noqa: E402
 from protocol.messages import (  # noqa: E402
-    ActorError, ActorStats, FramePose, MapSnapshot, RunEnd, RunStart,
+    ActorError, ActorStats, FramePose, LoopResult, MapDelta, MapSaved, MapSnapshot, RunEnd, RunStart,
 )
 
 
@@ -39,7 +39,7 @@ def describe(msg) -> str | None:
     if isinstance(msg, FramePose):
         t = msg.T_world_cam[:3, 3]
         where = (f"xyz {t[0]:8.3f} {t[1]:8.3f} {t[2]:8.3f}" if msg.status in ("init", "ok")
-                 else f"no pose ({msg.reason or 'lost'})")
+                 else f"no pose ({msg.lost_reason or 'lost'})")
         return (f"pose  #{msg.index:5d} {msg.status:4s} inliers {msg.n_inliers:4d} {where}"
                 f"{'  KF' if msg.is_keyframe else ''}")
     if isinstance(msg, ActorStats) and len(msg.service_ms):
@@ -49,6 +49,14 @@ def describe(msg) -> str | None:
                 f"cpu {msg.cpu_percent:5.1f}% rss {msg.rss_mb:6.0f} MB")
     if isinstance(msg, MapSnapshot):
         return f"map   {len(msg.keyframe_indices)} keyframes, {len(msg.points)} points, {len(msg.lines)} lines"
+    if isinstance(msg, MapDelta):
+        return (f"map   {len(msg.keyframe_indices)} keyframes, {msg.n_points} points "
+                f"(+{len(msg.point_ids)} new or moved, -{len(msg.removed_ids)} removed)")
+    if isinstance(msg, LoopResult) and msg.closed:
+        return f"loop  keyframe {msg.keyframe_index} <-> {msg.candidate}  {msg.n_inliers} inliers  ({msg.loops} closed)"
+    if isinstance(msg, MapSaved):
+        return (f"saved map {msg.path}: {msg.keyframes} keyframes, {msg.points} points" if msg.ok
+                else f"ERROR saving map {msg.path}: {msg.error}")
     if isinstance(msg, ActorError):
         return f"ERROR {msg.actor}: {msg.error}"
     return None
@@ -56,7 +64,8 @@ def describe(msg) -> str | None:
 
 def as_json(msg) -> str:
     body = {k: v for k, v in vars(msg).items() if k not in ("service_ms", "queue_ms", "points", "lines",
-                                                           "keyframe_poses", "keyframe_stamps")}
+                                                           "keyframe_poses", "keyframe_stamps", "positions",
+                                                           "point_ids", "removed_ids", "jpeg", "corrections")}
     return json.dumps(to_jsonable({"kind": msg.KIND, **body}))
 
 
@@ -65,7 +74,7 @@ def main(argv=None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("endpoint", help="the --inspect endpoint of a running launch.py")
     ap.add_argument("--kinds", nargs="*", default=None,
-                    help="message kinds to show (pose stats map_snapshot actor_error ...); default all")
+                    help="message kinds to show (pose stats map_delta loop_result actor_error ...); default all")
     ap.add_argument("--timeout", type=float, default=30.0, help="give up after this many silent seconds")
     ap.add_argument("--json", action="store_true", help="one JSON object per event")
     ap.add_argument("--client-key", help="this client's CURVE secret key file (for a non-loopback run)")
