@@ -51,18 +51,20 @@ def band_pairs(q_lo: np.ndarray, q_hi: np.ndarray, ref_key_sorted: np.ndarray) -
     return qi, rj
 
 
-def best_two(qi: np.ndarray, rj: np.ndarray, dist: np.ndarray, n_query: int):
+def best_two(qi: np.ndarray, rj: np.ndarray, dist: np.ndarray, n_query: int, second_ref: bool = False):
     """Per query: best reference, its distance and the second-best distance.
 
     Returns (best_ref (n_query,) int64 with -1 where none, best_dist, second_dist) where
-    missing distances are a large sentinel (1 << 20).
+    missing distances are a large sentinel (1 << 20); with ``second_ref`` also the second-best
+    reference (-1 where none) as a fourth array.
     """
     big = 1 << 20
     best_ref = np.full(n_query, -1, np.int64)
     best_d = np.full(n_query, big, np.int64)
     second_d = np.full(n_query, big, np.int64)
+    second_r = np.full(n_query, -1, np.int64)
     if len(qi) == 0:
-        return best_ref, best_d, second_d
+        return (best_ref, best_d, second_d, second_r) if second_ref else (best_ref, best_d, second_d)
     # one int64 key sorts by query, then by distance (distances are < 2**16)
     order = np.argsort(qi.astype(np.int64) * (1 << 16) + dist, kind="stable")
     qs, ds, rs = qi[order], dist[order], rj[order]
@@ -75,6 +77,9 @@ def best_two(qi: np.ndarray, rj: np.ndarray, dist: np.ndarray, n_query: int):
     has_second = nxt < len(qs)
     has_second[has_second] = qs[nxt[has_second]] == qs[fidx[has_second]]
     second_d[qs[fidx[has_second]]] = ds[nxt[has_second]]
+    if second_ref:
+        second_r[qs[fidx[has_second]]] = rs[nxt[has_second]]
+        return best_ref, best_d, second_d, second_r
     return best_ref, best_d, second_d
 
 
@@ -121,14 +126,18 @@ def grid_pairs(q_uv: np.ndarray, r_uv: np.ndarray, cell: float) -> tuple[np.ndar
 
 def match_in_window(q_uv: np.ndarray, q_words: np.ndarray, q_radius: np.ndarray,
                     r_uv: np.ndarray, r_words: np.ndarray, max_hamming: int, ratio: float,
-                    q_mask: np.ndarray | None = None, r_scale: np.ndarray | None = None):
+                    q_mask: np.ndarray | None = None, r_scale: np.ndarray | None = None,
+                    r_level: np.ndarray | None = None):
     """Match each query (e.g. a projected landmark) to the reference keypoint inside a circle.
 
     Candidates come from the 3x3 grid cells around the query, then a circle test; best Hamming
     distance <= max_hamming with best < ratio * second (Lowe ratio, as ORB-SLAM's
     SearchByProjection); each reference keypoint is kept for its closest query only.
     ``r_scale`` optionally widens the circle per reference keypoint (its octave scale, as
-    ORB-SLAM scales the search window with the pyramid level).
+    ORB-SLAM scales the search window with the pyramid level). With ``r_level`` (the reference
+    keypoints' pyramid levels) the ratio test applies only when the two best candidates sit on
+    the same level, as ORB-SLAM's SearchByProjection for the local map: a similar corner on
+    another level is not an ambiguity, it is the same structure at another scale.
     Returns (query indices, reference indices, distances).
     """
     n_q = len(q_uv)
@@ -159,8 +168,11 @@ def match_in_window(q_uv: np.ndarray, q_words: np.ndarray, q_radius: np.ndarray,
     ok = d2 <= rad**2
     qi, rj = qi[ok], rj[ok]
     dist = hamming_pairs(q_words, r_words, qi, rj)
-    best_ref, best_d, second_d = best_two(qi, rj, dist, n_q)
-    good = (best_ref >= 0) & (best_d <= max_hamming) & (best_d < ratio * second_d)
+    best_ref, best_d, second_d, second_r = best_two(qi, rj, dist, n_q, second_ref=True)
+    ambiguous = best_d >= ratio * second_d
+    if r_level is not None:
+        ambiguous &= (second_r >= 0) & (r_level[np.maximum(second_r, 0)] == r_level[np.maximum(best_ref, 0)])
+    good = (best_ref >= 0) & (best_d <= max_hamming) & ~ambiguous
     qsel = np.flatnonzero(good)
     rsel = best_ref[qsel]
     dsel = best_d[qsel]
