@@ -124,6 +124,33 @@ def grid_pairs(q_uv: np.ndarray, r_uv: np.ndarray, cell: float) -> tuple[np.ndar
     return np.concatenate(qis), np.concatenate(rjs)
 
 
+def grid_pairs_grouped(q_uv: np.ndarray, r_uv: np.ndarray, r_group: np.ndarray,
+                       cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``grid_pairs`` for references in groups, group g on its own grid of cell side
+    ``cells[g]`` (e.g. one group per pyramid level, the cell scaled with the level): every
+    (query, reference) pair whose cells on the reference's grid are 8-neighbours. All groups'
+    cells share one key space, so the 3 x n_groups row ranges of every query are searched in one
+    ``band_pairs`` call instead of one ``grid_pairs`` per group."""
+    cells = np.maximum(np.asarray(cells, float), 1.0)
+    n_groups = len(cells)
+    lo_uv = np.minimum(q_uv.min(axis=0), r_uv.min(axis=0))
+    span = np.maximum(q_uv.max(axis=0), r_uv.max(axis=0)) - lo_uv
+    n_cols = (span[0] // cells).astype(np.int64) + 3
+    n_rows = (span[1] // cells).astype(np.int64) + 3
+    offset = np.concatenate([[0], np.cumsum(n_cols * n_rows)[:-1]])
+    rc = ((r_uv - lo_uv) // cells[r_group][:, None]).astype(np.int64)
+    rkey = offset[r_group] + rc[:, 1] * n_cols[r_group] + rc[:, 0]
+    order = np.argsort(rkey, kind="stable")
+    qc = ((q_uv - lo_uv)[:, None, :] // cells[None, :, None]).astype(np.int64)    # (Q,G,2)
+    dy = np.array([-1, 0, 1])
+    row = qc[:, :, None, 1] + dy                                                     # (Q,G,3)
+    base = offset[None, :, None] + row * n_cols[None, :, None]
+    lo = np.where(row >= 0, base + np.maximum(qc[:, :, None, 0] - 1, 0), 1)
+    hi = np.where(row >= 0, base + qc[:, :, None, 0] + 1, 0)
+    needle, rpos = band_pairs(lo.reshape(-1), hi.reshape(-1), rkey[order])
+    return needle // (3 * n_groups), order[rpos]
+
+
 def match_in_window(q_uv: np.ndarray, q_words: np.ndarray, q_radius: np.ndarray,
                     r_uv: np.ndarray, r_words: np.ndarray, max_hamming: int, ratio: float,
                     q_mask: np.ndarray | None = None, r_scale: np.ndarray | None = None,
@@ -155,13 +182,8 @@ def match_in_window(q_uv: np.ndarray, q_words: np.ndarray, q_radius: np.ndarray,
         qi, rj = grid_pairs(q_uv[sel], r_uv, rmax)
     else:
         # one grid per reference scale: coarse keypoints get wide cells, fine ones narrow cells
-        qis, rjs = [], []
-        for sc in np.unique(r_scale):
-            ref = np.flatnonzero(r_scale == sc)
-            a, b = grid_pairs(q_uv[sel], r_uv[ref], rmax * float(sc))
-            qis.append(a)
-            rjs.append(ref[b])
-        qi, rj = np.concatenate(qis), np.concatenate(rjs)
+        scales, group = np.unique(r_scale, return_inverse=True)
+        qi, rj = grid_pairs_grouped(q_uv[sel], r_uv, group.reshape(-1), rmax * scales)
     qi = sel[qi]
     d2 = ((q_uv[qi] - r_uv[rj]) ** 2).sum(axis=1)
     rad = q_radius[qi] if r_scale is None else q_radius[qi] * r_scale[rj]
