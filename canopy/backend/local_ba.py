@@ -44,16 +44,9 @@ class LocalBundleAdjustmentMixin:
         if not lm_ids and (lines is None or len(lines[0]) == 0):
             return
         # edges: (kf, landmark, keypoint)
-        e_kf, e_lm, e_kp = [], [], []
-        for lid in lm_ids:
-            for k, i in self.landmarks[lid].obs.items():
-                if k in kf_set:
-                    e_kf.append(k)
-                    e_lm.append(lid)
-                    e_kp.append(i)
-        e_kf = np.asarray(e_kf)
-        e_lm = np.asarray(e_lm)
-        e_kp = np.asarray(e_kp)
+        edges = np.array([(k, lid, i) for lid in lm_ids for k, i in self.landmarks[lid].obs.items() if k in kf_set],
+                         np.int64).reshape(-1, 3)
+        e_kf, e_lm, e_kp = edges[:, 0], edges[:, 1], edges[:, 2]
         uv = np.empty((len(e_kf), 2))
         ur = np.empty(len(e_kf))
         octv = np.empty(len(e_kf), np.int64)

@@ -96,14 +96,52 @@ def _jacobians(Pc: np.ndarray, R: np.ndarray, edges: StereoEdges, calib: StereoC
     return Jc, Jp @ R
 
 
-def _sum_blocks(keys: np.ndarray, blocks: np.ndarray, n: int) -> np.ndarray:
-    """Sum ``blocks`` (M,...) into ``n`` slots by ``keys`` (M,): one bincount over all entries."""
-    shape = blocks.shape[1:]
-    c = int(np.prod(shape)) if shape else 1
-    if len(keys) == 0:
-        return np.zeros((n,) + shape)
-    flat = (keys[:, None] * c + np.arange(c)).reshape(-1)
-    return np.bincount(flat, weights=blocks.reshape(-1), minlength=n * c).reshape((n,) + shape)
+class _Groups:
+    """Sums of per-item blocks by an integer key in [0, n), with the grouping computed once (the
+    edges of a BA keep their poses and points through all iterations): a sort, then
+    ``np.add.reduceat`` over contiguous runs."""
+
+    def __init__(self, keys: np.ndarray, n: int):
+        self.order = np.argsort(keys, kind="stable")
+        ks = keys[self.order]
+        self.starts = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]]) if len(ks) else np.zeros(0, np.int64)
+        self.keys = ks[self.starts]
+        self.n = n
+
+    def sum(self, blocks: np.ndarray, presorted: bool = False) -> np.ndarray:
+        out = np.zeros((self.n,) + blocks.shape[1:])
+        if len(self.starts):
+            b = blocks if presorted else blocks[self.order]
+            out[self.keys] = np.add.reduceat(b.reshape(len(b), -1), self.starts, axis=0).reshape(
+                (len(self.starts),) + blocks.shape[1:])
+        return out
+
+
+@dataclass
+class _Structure:
+    """What stays fixed while LM iterates over one edge set: local edges, groupings, and the pairs
+    of local edges on one point (the couplings of the Schur complement), sorted by pose pair."""
+
+    loc: np.ndarray          # indices of edges whose pose is optimised
+    by_point: _Groups        # all edges by point
+    loc_by_pose: _Groups     # local edges by pose
+    loc_by_point: _Groups    # local edges by point
+    pair_a: np.ndarray       # pairs (a, b) of local edges (indices into loc) on the same point,
+    pair_b: np.ndarray       # sorted by the pose pair (pose[a], pose[b])
+    pair_blocks: _Groups     # pairs by pose pair
+
+    @staticmethod
+    def build(edges: StereoEdges, n_local: int, n_points: int) -> "_Structure":
+        loc = np.flatnonzero(edges.pose < n_local)
+        pts, kf = edges.point[loc], edges.pose[loc]
+        order = np.argsort(pts, kind="stable")
+        a, pos = band_pairs(pts, pts, pts[order])
+        b = order[pos]
+        block = kf[a] * n_local + kf[b]
+        srt = np.argsort(block, kind="stable")
+        a, b = a[srt], b[srt]
+        return _Structure(loc, _Groups(edges.point, n_points), _Groups(kf, n_local), _Groups(pts, n_points),
+                          a, b, _Groups(block[srt], n_local * n_local))
 
 
 def _mv(M: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -114,50 +152,39 @@ def _mv(M: np.ndarray, v: np.ndarray) -> np.ndarray:
 class _Linearised:
     """Normal equations of one linearisation point, eliminated onto the local poses."""
 
-    def __init__(self, T_cw, X, edges: StereoEdges, n_local: int, calib: StereoCalibration):
+    def __init__(self, T_cw, X, edges: StereoEdges, n_local: int, calib: StereoCalibration, st: _Structure):
         r, Pc, R, front = _project(T_cw, X, edges, calib)
         self.cost, w = _robust_cost(r, front, edges)
         Jc, Jx = _jacobians(Pc, R, edges, calib)
         Wr = r * w[:, None]
         JxT = Jx.transpose(0, 2, 1)
-        n_pts = len(X)
-        self.Hpp = _sum_blocks(edges.point, JxT @ (Jx * w[:, None, None]), n_pts)
-        self.bp = _sum_blocks(edges.point, _mv(JxT, Wr), n_pts)
-        loc = np.flatnonzero(edges.pose < n_local)
+        self.Hpp = st.by_point.sum(JxT @ (Jx * w[:, None, None]))
+        self.bp = st.by_point.sum(_mv(JxT, Wr))
+        loc = st.loc
         JlT = Jc[loc].transpose(0, 2, 1)
         wl = w[loc, None, None]
-        self.Hcc = _sum_blocks(edges.pose[loc], JlT @ (Jc[loc] * wl), n_local)
-        self.bc = _sum_blocks(edges.pose[loc], _mv(JlT, Wr[loc]), n_local)
+        self.Hcc = st.loc_by_pose.sum(JlT @ (Jc[loc] * wl))
+        self.bc = st.loc_by_pose.sum(_mv(JlT, Wr[loc]))
         self.Hcp = JlT @ (Jx[loc] * wl)                                   # (m,6,3)
         self.pts, self.kf = edges.point[loc], edges.pose[loc]
         self.n_local = n_local
+        self.st = st
 
-    def solve(self, lam: float, pairs: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-        """Damped step: (n_local,6) pose increments and (P,3) point increments. ``pairs``: the
-        (a, b) index pairs of local edges on the same point (``same_point_pairs``)."""
-        L, P = self.n_local, len(self.Hpp)
+    def solve(self, lam: float) -> tuple[np.ndarray, np.ndarray]:
+        """Damped step: (n_local,6) pose increments and (P,3) point increments."""
+        L, st = self.n_local, self.st
         Hpp_inv = np.linalg.inv(self.Hpp + lam * np.eye(3))
         A = self.Hcp @ Hpp_inv[self.pts]                               # (m,6,3) H_cp Hpp^-1
-        a, b = pairs
         # reduced camera system: S = H_cc + lam I - sum over points of H_cp Hpp^-1 H_pc
-        C = A[a] @ self.Hcp[b].transpose(0, 2, 1)                      # (pairs,6,6)
-        S4 = -_sum_blocks(self.kf[a] * L + self.kf[b], C, L * L).reshape(L, L, 6, 6)
+        C = A[st.pair_a] @ self.Hcp[st.pair_b].transpose(0, 2, 1)      # (pairs,6,6), sorted by pose pair
+        S4 = -st.pair_blocks.sum(C, presorted=True).reshape(L, L, 6, 6)
         idx = np.arange(L)
         S4[idx, idx] += self.Hcc + lam * np.eye(6)
         S = S4.transpose(0, 2, 1, 3).reshape(6 * L, 6 * L)
-        g = self.bc - _sum_blocks(self.kf, _mv(A, self.bp[self.pts]), L)
+        g = self.bc - st.loc_by_pose.sum(_mv(A, self.bp[self.pts]))
         dc = np.linalg.solve(S, g.reshape(-1)).reshape(L, 6)
-        rhs = self.bp - _sum_blocks(self.pts, _mv(self.Hcp.transpose(0, 2, 1), dc[self.kf]), P)
+        rhs = self.bp - st.loc_by_point.sum(_mv(self.Hcp.transpose(0, 2, 1), dc[self.kf]))
         return dc, _mv(Hpp_inv, rhs)
-
-
-def same_point_pairs(edges: StereoEdges, n_local: int) -> tuple[np.ndarray, np.ndarray]:
-    """All ordered pairs (a, b) of local edges (indices among the local edges, in order) that
-    observe the same point, a == b included: the couplings the Schur complement needs."""
-    pts = edges.point[edges.pose < n_local]
-    order = np.argsort(pts, kind="stable")
-    a, pos = band_pairs(pts, pts, pts[order])
-    return a, order[pos]
 
 
 def edge_chi2(T_cw: np.ndarray, X: np.ndarray, edges: StereoEdges, calib: StereoCalibration,
@@ -185,14 +212,14 @@ def bundle_adjust_points(T_cw: np.ndarray, n_local: int, X: np.ndarray, edges: S
     if len(edges.pose) == 0:
         return T_cw, X, 0
     lam = LAMBDA_INITIAL
-    pairs = same_point_pairs(edges, n_local)
-    lin = _Linearised(T_cw, X, edges, n_local, calib)
+    st = _Structure.build(edges, n_local, len(X))
+    lin = _Linearised(T_cw, X, edges, n_local, calib, st)
     it = 0
     for it in range(1, max_iterations + 1):
         accepted = False
         while lam <= LAMBDA_MAX:
             try:
-                dc, dp = lin.solve(lam, pairs)
+                dc, dp = lin.solve(lam)
             except np.linalg.LinAlgError:
                 lam *= LAMBDA_FACTOR
                 continue
@@ -208,7 +235,7 @@ def bundle_adjust_points(T_cw: np.ndarray, n_local: int, X: np.ndarray, edges: S
         old = lin.cost
         T_cw, X = T_try, X_try
         lam = max(lam / LAMBDA_FACTOR, 1e-12)
-        lin = _Linearised(T_cw, X, edges, n_local, calib)
+        lin = _Linearised(T_cw, X, edges, n_local, calib, st)
         if old - lin.cost < RELATIVE_ERROR_TOL * old:
             break
     return T_cw, X, it

@@ -65,6 +65,8 @@ def best_two(qi: np.ndarray, rj: np.ndarray, dist: np.ndarray, n_query: int, sec
     second_r = np.full(n_query, -1, np.int64)
     if len(qi) == 0:
         return (best_ref, best_d, second_d, second_r) if second_ref else (best_ref, best_d, second_d)
+    if len(qi) > 1 and bool(np.all(qi[1:] >= qi[:-1])):
+        return _best_two_grouped(qi, rj, dist, best_ref, best_d, second_d, second_r, second_ref)
     # one int64 key sorts by query, then by distance (distances are < 2**16)
     order = np.argsort(qi.astype(np.int64) * (1 << 16) + dist, kind="stable")
     qs, ds, rs = qi[order], dist[order], rj[order]
@@ -79,6 +81,29 @@ def best_two(qi: np.ndarray, rj: np.ndarray, dist: np.ndarray, n_query: int, sec
     second_d[qs[fidx[has_second]]] = ds[nxt[has_second]]
     if second_ref:
         second_r[qs[fidx[has_second]]] = rs[nxt[has_second]]
+        return best_ref, best_d, second_d, second_r
+    return best_ref, best_d, second_d
+
+
+def _best_two_grouped(qi, rj, dist, best_ref, best_d, second_d, second_r, want_second_ref):
+    """``best_two`` when the pairs come grouped by query (``qi`` non-decreasing, as
+    ``band_pairs`` makes them): segment minima instead of a sort, O(n). Ties go to the earlier
+    pair, as the stable sort does."""
+    n = len(qi)
+    starts = np.flatnonzero(np.r_[True, qi[1:] != qi[:-1]])
+    q = qi[starts]
+    pos = np.arange(n, dtype=np.int64)
+    key = dist.astype(np.int64) * n + pos           # distance first, then position
+    best_key = np.minimum.reduceat(key, starts)
+    best_pos = best_key % n
+    best_ref[q] = rj[best_pos]
+    best_d[q] = best_key // n
+    key[best_pos] = np.iinfo(np.int64).max          # the runner-up: minimum of the rest
+    sec_key = np.minimum.reduceat(key, starts)
+    has = sec_key != np.iinfo(np.int64).max
+    second_d[q[has]] = sec_key[has] // n
+    if want_second_ref:
+        second_r[q[has]] = rj[sec_key[has] % n]
         return best_ref, best_d, second_d, second_r
     return best_ref, best_d, second_d
 
