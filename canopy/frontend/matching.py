@@ -204,7 +204,7 @@ def match_in_window(q_uv: np.ndarray, q_words: np.ndarray, q_radius: np.ndarray,
         return empty
     rmax = float(np.max(q_radius[sel]))
     if r_scale is None:
-        qi, rj = grid_pairs(q_uv[sel], r_uv, rmax)
+        qi, rj = grid_pairs_grouped(q_uv[sel], r_uv, np.zeros(len(r_uv), np.int64), np.array([rmax]))
     else:
         # one grid per reference scale: coarse keypoints get wide cells, fine ones narrow cells
         scales, group = np.unique(r_scale, return_inverse=True)
