@@ -142,6 +142,9 @@ class TrackingActor(Actor):
         if ctx.has_output("recorder"):  # never block tracking on the recorder
             ctx.send("recorder", pose, block=False)
             ctx.send("recorder", handle, block=False)
+        # wall clock of the first and last tracked frame: throughput without process start-up
+        ctx.extra.setdefault("first_frame_done_at", time.time())
+        ctx.extra["last_frame_done_at"] = time.time()
         ctx.extra.update(self.counts)
         if self.lockstep:
             ctx.send("source", FrameDone(index=res.index, sent_at=time.time()))

@@ -34,10 +34,10 @@ def keyframe(k, T_true, T_init, X, ids_existing, ids_new, rng, depth_noise=0.0, 
         landmark_ids=ids_existing, new_landmark_ids=ids_new, restart=(k == 0))
 
 
-def run_ba(rng, pose_noise=(0.01, 0.03), depth_noise=0.03, outlier=False):
+def run_ba(rng, pose_noise=(0.01, 0.03), depth_noise=0.03, outlier=False, solver="schur", mono_fraction=0.0):
     poses, X = scene(rng)
     n = len(X)
-    mapper = LocalMapper(CALIB, MappingParams(ba_iterations=20))
+    mapper = LocalMapper(CALIB, MappingParams(ba_iterations=20, ba_solver=solver))
     ids = np.arange(n, dtype=np.int64)
     updates = []
     for k in range(N_KF):
@@ -52,6 +52,7 @@ def run_ba(rng, pose_noise=(0.01, 0.03), depth_noise=0.03, outlier=False):
                 off = np.zeros((n, 3))
                 off[0] = [25.0, -20.0, 25.0]
             kf = keyframe(k, poses[k], T_init, X, ids, np.full(n, -1, np.int64), rng, pixel_offsets=off)
+            kf.u_right[rng.random(n) < mono_fraction] = -1.0  # no stereo match: a monocular observation
         updates.append(mapper.insert_keyframe(kf))
     return mapper, poses, X, updates
 
@@ -61,9 +62,10 @@ def test_mapping_params_validate():
         MappingParams(window_size=1)
 
 
-def test_local_ba_recovers_true_poses_and_points():
+@pytest.mark.parametrize("solver", ["schur", "gtsam"])
+def test_local_ba_recovers_true_poses_and_points(solver):
     rng = np.random.default_rng(0)
-    mapper, poses, X, updates = run_ba(rng)
+    mapper, poses, X, updates = run_ba(rng, solver=solver)
     traj = mapper.keyframe_trajectory()
     assert len(traj) == N_KF
     for T_est, T_true in zip(traj.poses, poses):
@@ -79,14 +81,36 @@ def test_local_ba_recovers_true_poses_and_points():
     assert {"insert", "ba", "cull", "total"} <= set(last.timings)
 
 
-def test_ba_is_robust_and_culls_outlier_landmark():
+@pytest.mark.parametrize("solver", ["schur", "gtsam"])
+def test_ba_is_robust_and_culls_outlier_landmark(solver):
     rng = np.random.default_rng(1)
-    mapper, poses, X, _ = run_ba(rng, outlier=True)
+    mapper, poses, X, _ = run_ba(rng, outlier=True, solver=solver)
     assert 0 not in mapper.landmarks          # its bad observations were dropped, then the landmark
     assert len(mapper.landmarks) >= len(X) - 5
     assert mapper.n_culled >= 1
     for T_est, T_true in zip(mapper.keyframe_trajectory().poses, poses):
         assert np.linalg.norm((se3_inv(T_true) @ T_est)[:3, 3]) < 2e-3
+
+
+def test_schur_solver_matches_gtsam_graph():
+    """The numpy Schur-complement BA minimises the same robust cost as the GTSAM graph: with
+    noisy poses and depths, stereo and monocular observations, both land on the same optimum."""
+    out = {}
+    for solver in ("schur", "gtsam"):
+        mapper, _, _, _ = run_ba(np.random.default_rng(3), pose_noise=(0.02, 0.05), depth_noise=0.05,
+                                 solver=solver, mono_fraction=0.3)
+        out[solver] = mapper
+    a, b = out["schur"], out["gtsam"]
+    for k in a.keyframes:
+        assert np.abs(a.keyframes[k].T_world_cam - b.keyframes[k].T_world_cam).max() < 1e-6
+    assert a.landmarks.keys() == b.landmarks.keys()
+    diff = [np.linalg.norm(a.landmarks[i].position - b.landmarks[i].position) for i in a.landmarks]
+    assert max(diff) < 1e-5
+
+
+def test_mapping_params_reject_unknown_solver():
+    with pytest.raises(ConfigError, match="ba_solver"):
+        MappingParams(ba_solver="ceres")
 
 
 def test_restart_starts_new_segment_without_links():

@@ -86,6 +86,24 @@ def test_best_two_and_window_matching():
     assert len(q) >= 95 and np.array_equal(q, r)
 
 
+def test_window_ratio_test_only_between_candidates_on_one_level():
+    """A landmark with two equally similar keypoints in its window is ambiguous when both sit on
+    the same pyramid level, not when they are the same corner on two levels (ORB-SLAM)."""
+    rng = np.random.default_rng(4)
+    d = rng.integers(0, 256, (1, 32), dtype=np.uint8)
+    near = d.copy()
+    near[0, 0] ^= 0b11111                               # 5 bits from the landmark's descriptor
+    ref_desc = np.concatenate([d, near])
+    ref_desc[0, 1] ^= 0b1111                            # best 4 bits, second 5: 4 >= 0.8 * 5
+    uv_q = np.array([[100.0, 100.0]])
+    uv_r = np.array([[101.0, 100.0], [99.0, 101.0]])
+    args = (uv_q, as_words(d), np.array([5.0]), uv_r, as_words(ref_desc), 50, 0.8)
+    assert len(match_in_window(*args)[0]) == 0                                    # ambiguous
+    assert len(match_in_window(*args, r_level=np.array([0, 0]))[0]) == 0         # same level
+    q, r, _ = match_in_window(*args, r_level=np.array([0, 1]))                    # two levels
+    assert q.tolist() == [0] and r.tolist() == [0]
+
+
 def test_grid_select_spreads_features():
     rng = np.random.default_rng(3)
     uv = np.concatenate([rng.uniform(0, 100, (900, 2)), rng.uniform(100, 640, (100, 2))])

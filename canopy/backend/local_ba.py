@@ -12,6 +12,7 @@ import numpy as np
 
 from canopy.backend.line_factors import (line_custom_factor, line_endpoint_measurements, line_projection_factors,
                                          right_shift)
+from canopy.backend.stereo_ba import StereoEdges, bundle_adjust_points, edge_chi2
 from canopy.frontend.geometry import se3_inv
 
 X = gtsam.symbol_shorthand.X
@@ -54,6 +55,9 @@ class LocalBundleAdjustmentMixin:
             octv[m] = kf.octave[e_kp[m]]
         stereo = ur >= 0
         active = np.ones(len(e_kf), bool)
+        if lines is None and p.ba_solver == "schur":
+            self._bundle_adjust_schur(local, fixed, lm_ids, e_kf, e_lm, uv, ur, octv, stereo, scale)
+            return
         values = gtsam.Values()
         for k in sorted(kf_set):
             values.insert(X(k), gtsam.Pose3(self.keyframes[k].T_world_cam))
@@ -120,6 +124,39 @@ class LocalBundleAdjustmentMixin:
             l_bad = l_out | (judged & (self._line_edge_chi2(values, l_kf, l_id, l_coef, l_right) > p.chi2_line))
             for j in np.flatnonzero(l_bad).tolist():
                 self._remove_line_observation(int(l_id[j]), int(l_kf[j]), bool(l_right[j]))
+
+    def _bundle_adjust_schur(self, local, fixed, lm_ids, e_kf, e_lm, uv, ur, octv, stereo, scale) -> None:
+        """The points-only BA of ``_bundle_adjust`` with the numpy Schur-complement solver
+        (``canopy.backend.stereo_ba``): same residuals, kernels, passes and outlier rules."""
+        p = self.params
+        poses = list(local) + list(fixed)
+        pose_index = {k: i for i, k in enumerate(poses)}
+        T_cw = np.stack([se3_inv(self.keyframes[k].T_world_cam) for k in poses])
+        lm_arr = np.asarray(lm_ids, np.int64)
+        X = np.array([self.landmarks[lid].position for lid in lm_ids], float).reshape(-1, 3)
+        pose_of_edge = np.array([pose_index[k] for k in e_kf.tolist()], np.int64)
+        point_of_edge = np.searchsorted(lm_arr, e_lm)
+        meas = np.column_stack([uv, np.where(stereo, ur, 0.0)])
+        sigma = p.pixel_sigma * scale ** octv.astype(float)
+        huber = np.where(stereo, p.huber_stereo, p.huber_mono)
+        thr = np.where(stereo, p.chi2_stereo, p.chi2_mono)
+        active = np.ones(len(e_kf), bool)
+        all_edges = StereoEdges(pose_of_edge, point_of_edge, meas, stereo, sigma, huber)
+        for _ in range(p.ba_passes):
+            a = np.flatnonzero(active)
+            edges = StereoEdges(pose_of_edge[a], point_of_edge[a], meas[a], stereo[a], sigma[a], huber[a])
+            T_cw, X, _ = bundle_adjust_points(T_cw, len(local), X, edges, self.calib, p.ba_iterations)
+            bad = edge_chi2(T_cw, X, all_edges, self.calib, p.min_depth) > thr
+            if not (active & bad).any():
+                break
+            active &= ~bad
+        for i, k in enumerate(local):
+            self.keyframes[k].T_world_cam = se3_inv(T_cw[i])
+        for j, lid in enumerate(lm_ids):
+            self.landmarks[lid].position = X[j].copy()
+        bad = ~active | (edge_chi2(T_cw, X, all_edges, self.calib, p.min_depth) > thr)
+        for j in np.flatnonzero(bad).tolist():
+            self._remove_observation(int(e_lm[j]), int(e_kf[j]))
 
     # ----------------------------------------------------------------- line terms (Eq. 10)
     def _line_edges(self, local: list[int], kf_set: set[int]):

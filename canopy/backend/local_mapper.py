@@ -120,8 +120,7 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
             self.landmarks[lid] = Landmark(lid, Pw[j], rec.descriptors[i].copy(), {kf.index: i},
                                            first_order=rec.order, segment=self._segment)
             rec.landmark[i] = lid
-        for lm in touched:
-            self._update_descriptor(lm)
+        self._update_descriptors(touched)
         if self.params.use_lines:
             self._insert_lines(kf, rec)
         return rec
@@ -155,14 +154,21 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
                                            first_order=rec.order, segment=self._segment)
             rec.line_landmark[i] = lid
 
-    def _update_descriptor(self, lm: Landmark) -> None:
-        """ORB-SLAM's distinctive descriptor: the observation with the least median distance."""
-        if len(lm.obs) < 3:
-            return
-        desc = np.stack([self.keyframes[k].descriptors[i] for k, i in lm.obs.items()])
-        w = as_words(desc)
-        D = _popcount64(w[:, None, :] ^ w[None, :, :]).sum(-1)
-        lm.descriptor = desc[int(np.argmin(np.median(D, axis=1)))].copy()
+    def _update_descriptors(self, landmarks: list[Landmark]) -> None:
+        """ORB-SLAM's distinctive descriptor: the observation with the least median distance to
+        the others. Batched over landmarks with the same number of observations."""
+        by_count: dict[int, list[Landmark]] = {}
+        for lm in landmarks:
+            if len(lm.obs) >= 3:
+                by_count.setdefault(len(lm.obs), []).append(lm)
+        for n, group in by_count.items():
+            desc = np.array([[self.keyframes[k].descriptors[i] for k, i in lm.obs.items()] for lm in group],
+                            np.uint8).reshape(len(group), n, 32)
+            w = as_words(desc.reshape(-1, 32)).reshape(len(group), n, 4)
+            D = _popcount64(w[:, :, None, :] ^ w[:, None, :, :]).sum(-1)      # (G,n,n)
+            best = np.argmin(np.median(D, axis=2), axis=1)
+            for lm, d in zip(group, desc[np.arange(len(group)), best]):
+                lm.descriptor = d.copy()
 
     # ----------------------------------------------------------------- covisibility window
     def _covisible(self, rec: Keyframe) -> dict[int, int]:
@@ -188,10 +194,10 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         neigh.sort(key=lambda k: (-counts[k], -k))
         local = [rec.index] + neigh[: p.window_size - 1]
         local_set = set(local)
-        fixed_set: set[int] = set()
+        seen = set()
         for k in local:
-            for lid in self.keyframes[k].landmark[self.keyframes[k].landmark >= 0].tolist():
-                fixed_set.update(o for o in self.landmarks[lid].obs if o not in local_set)
+            seen.update(self.keyframes[k].landmark[self.keyframes[k].landmark >= 0].tolist())
+        fixed_set = {o for lid in seen for o in self.landmarks[lid].obs} - local_set
         first = self._segment_first[rec.segment]
         if first in local_set and len(local) > 1:  # the segment's first keyframe fixes the gauge
             local.remove(first)

@@ -107,14 +107,9 @@ class MapStoreAccess:
         every observation of them by a keyframe of ``kf_set``, as arrays (keyframe, landmark,
         keypoint row). Returns (lm_ids, e_kf, e_lm, e_kp)."""
         lm_ids = sorted({lid for k in local for lid in self.keyframes[k].landmark[self.keyframes[k].landmark >= 0].tolist()})
-        e_kf, e_lm, e_kp = [], [], []
-        for lid in lm_ids:
-            for k, i in self.landmarks[lid].obs.items():
-                if k in kf_set:
-                    e_kf.append(k)
-                    e_lm.append(lid)
-                    e_kp.append(i)
-        return lm_ids, np.asarray(e_kf, np.int64), np.asarray(e_lm, np.int64), np.asarray(e_kp, np.int64)
+        edges = np.array([(k, lid, i) for lid in lm_ids for k, i in self.landmarks[lid].obs.items() if k in kf_set],
+                         np.int64).reshape(-1, 3)  # one comprehension: the per-keyframe BA's hot loop
+        return lm_ids, edges[:, 0], edges[:, 1], edges[:, 2]
 
     def _delete_landmark(self, lid: int) -> None:
         """Cull landmark ``lid``: out of the store and out of every keyframe that observed it."""

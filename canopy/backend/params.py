@@ -16,6 +16,10 @@ class MappingParams:
     covisibility_min_shared: int = 15    # landmarks two keyframes must share to be neighbours
     ba_iterations: int = 10              # Levenberg-Marquardt iterations per BA pass
     ba_passes: int = 2                   # ORB-SLAM: robust pass, drop outliers, refine again
+    # points-only BA solver: "schur" (canopy.backend.stereo_ba: numpy, landmarks eliminated onto
+    # the local poses, ~5x cheaper) or "gtsam" (one factor per observation). With use_lines the
+    # GTSAM graph is always used (the line terms live there).
+    ba_solver: str = "schur"
     pixel_sigma: float = 1.0             # px at octave 0; sigma = pixel_sigma * scale**octave
     huber_stereo: float = math.sqrt(CHI2_95_3DOF)  # robust kernel widths (whitened units)
     huber_mono: float = math.sqrt(CHI2_95_2DOF)
@@ -69,6 +73,7 @@ class MappingParams:
         need(self.covisibility_min_shared >= 1, "covisibility_min_shared", "must be >= 1")
         need(self.ba_iterations >= 1, "ba_iterations", "must be >= 1")
         need(self.ba_passes >= 1, "ba_passes", "must be >= 1")
+        need(self.ba_solver in ("schur", "gtsam"), "ba_solver", "must be 'schur' or 'gtsam'")
         need(self.pixel_sigma > 0, "pixel_sigma", "must be > 0")
         need(self.huber_stereo > 0 and self.huber_mono > 0, "huber_stereo", "and huber_mono must be > 0")
         need(self.chi2_stereo > 0 and self.chi2_mono > 0, "chi2_stereo", "and chi2_mono must be > 0")

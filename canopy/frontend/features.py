@@ -45,7 +45,11 @@ def grid_select(uv: np.ndarray, response: np.ndarray, width: int, height: int,
     cx = np.clip((uv[:, 0] * cols / width).astype(np.int64), 0, cols - 1)
     cy = np.clip((uv[:, 1] * rows / height).astype(np.int64), 0, rows - 1)
     cell = cy * cols + cx
-    order = np.lexsort((-response, cell))
+    # by cell, strongest first within a cell (one argsort on a combined key; responses are
+    # replaced by their rank so the key stays an exact integer)
+    rank_resp = np.empty(n, np.int64)
+    rank_resp[np.argsort(-response, kind="stable")] = np.arange(n)
+    order = np.argsort(cell * n + rank_resp)
     cs = cell[order]
     first = np.ones(n, bool)
     first[1:] = cs[1:] != cs[:-1]
@@ -98,9 +102,10 @@ class OrbExtractor:
             kps, desc = self._orb.detectAndCompute(image, None)
         if desc is None or len(kps) == 0:
             return Features.empty()
-        uv = np.array([k.pt for k in kps], np.float32).reshape(-1, 2)
-        octave = np.array([k.octave for k in kps], np.int32)
-        response = np.array([k.response for k in kps], np.float32)
+        uv = cv2.KeyPoint_convert(kps).astype(np.float32).reshape(-1, 2)
+        octave_response = np.array([(k.octave, k.response) for k in kps], np.float64).reshape(-1, 2)
+        octave = octave_response[:, 0].astype(np.int32)
+        response = octave_response[:, 1].astype(np.float32)
         h, w = image.shape[:2]
         keep = grid_select(uv, response, w, h, self.params.n_features,
                            self.params.grid_cols, self.params.grid_rows)

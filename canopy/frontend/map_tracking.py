@@ -26,9 +26,10 @@ class MapTrackingMixin:
         in_view = ((Pc[:, 2] > 0) & (proj[:, 0] >= 0) & (proj[:, 0] < self.calib.width)
                    & (proj[:, 1] >= 0) & (proj[:, 1] < self.calib.height))
         r_scale = self.scale_factors[feats.octave] if scaled else None
+        r_level = feats.octave if scaled and self.params.map_ratio_same_level else None
         q, r, _ = match_in_window(proj[:, :2], words, np.full(len(pos), radius), feats.uv, kp_words,
                                   self.params.map_max_hamming, self.params.map_ratio, q_mask=in_view,
-                                  r_scale=r_scale)
+                                  r_scale=r_scale, r_level=r_level)
         return q, r, in_view
 
     def _initial_matches(self, T_pred_cw, view: MapView, feats: Features, kp_words):

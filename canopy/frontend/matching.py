@@ -51,18 +51,22 @@ def band_pairs(q_lo: np.ndarray, q_hi: np.ndarray, ref_key_sorted: np.ndarray) -
     return qi, rj
 
 
-def best_two(qi: np.ndarray, rj: np.ndarray, dist: np.ndarray, n_query: int):
+def best_two(qi: np.ndarray, rj: np.ndarray, dist: np.ndarray, n_query: int, second_ref: bool = False):
     """Per query: best reference, its distance and the second-best distance.
 
     Returns (best_ref (n_query,) int64 with -1 where none, best_dist, second_dist) where
-    missing distances are a large sentinel (1 << 20).
+    missing distances are a large sentinel (1 << 20); with ``second_ref`` also the second-best
+    reference (-1 where none) as a fourth array.
     """
     big = 1 << 20
     best_ref = np.full(n_query, -1, np.int64)
     best_d = np.full(n_query, big, np.int64)
     second_d = np.full(n_query, big, np.int64)
+    second_r = np.full(n_query, -1, np.int64)
     if len(qi) == 0:
-        return best_ref, best_d, second_d
+        return (best_ref, best_d, second_d, second_r) if second_ref else (best_ref, best_d, second_d)
+    if len(qi) > 1 and bool(np.all(qi[1:] >= qi[:-1])):
+        return _best_two_grouped(qi, rj, dist, best_ref, best_d, second_d, second_r, second_ref)
     # one int64 key sorts by query, then by distance (distances are < 2**16)
     order = np.argsort(qi.astype(np.int64) * (1 << 16) + dist, kind="stable")
     qs, ds, rs = qi[order], dist[order], rj[order]
@@ -75,6 +79,32 @@ def best_two(qi: np.ndarray, rj: np.ndarray, dist: np.ndarray, n_query: int):
     has_second = nxt < len(qs)
     has_second[has_second] = qs[nxt[has_second]] == qs[fidx[has_second]]
     second_d[qs[fidx[has_second]]] = ds[nxt[has_second]]
+    if second_ref:
+        second_r[qs[fidx[has_second]]] = rs[nxt[has_second]]
+        return best_ref, best_d, second_d, second_r
+    return best_ref, best_d, second_d
+
+
+def _best_two_grouped(qi, rj, dist, best_ref, best_d, second_d, second_r, want_second_ref):
+    """``best_two`` when the pairs come grouped by query (``qi`` non-decreasing, as
+    ``band_pairs`` makes them): segment minima instead of a sort, O(n). Ties go to the earlier
+    pair, as the stable sort does."""
+    n = len(qi)
+    starts = np.flatnonzero(np.r_[True, qi[1:] != qi[:-1]])
+    q = qi[starts]
+    pos = np.arange(n, dtype=np.int64)
+    key = dist.astype(np.int64) * n + pos           # distance first, then position
+    best_key = np.minimum.reduceat(key, starts)
+    best_pos = best_key % n
+    best_ref[q] = rj[best_pos]
+    best_d[q] = best_key // n
+    key[best_pos] = np.iinfo(np.int64).max          # the runner-up: minimum of the rest
+    sec_key = np.minimum.reduceat(key, starts)
+    has = sec_key != np.iinfo(np.int64).max
+    second_d[q[has]] = sec_key[has] // n
+    if want_second_ref:
+        second_r[q[has]] = rj[sec_key[has] % n]
+        return best_ref, best_d, second_d, second_r
     return best_ref, best_d, second_d
 
 
@@ -119,16 +149,47 @@ def grid_pairs(q_uv: np.ndarray, r_uv: np.ndarray, cell: float) -> tuple[np.ndar
     return np.concatenate(qis), np.concatenate(rjs)
 
 
+def grid_pairs_grouped(q_uv: np.ndarray, r_uv: np.ndarray, r_group: np.ndarray,
+                       cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``grid_pairs`` for references in groups, group g on its own grid of cell side
+    ``cells[g]`` (e.g. one group per pyramid level, the cell scaled with the level): every
+    (query, reference) pair whose cells on the reference's grid are 8-neighbours. All groups'
+    cells share one key space, so the 3 x n_groups row ranges of every query are searched in one
+    ``band_pairs`` call instead of one ``grid_pairs`` per group."""
+    cells = np.maximum(np.asarray(cells, float), 1.0)
+    n_groups = len(cells)
+    lo_uv = np.minimum(q_uv.min(axis=0), r_uv.min(axis=0))
+    span = np.maximum(q_uv.max(axis=0), r_uv.max(axis=0)) - lo_uv
+    n_cols = (span[0] // cells).astype(np.int64) + 3
+    n_rows = (span[1] // cells).astype(np.int64) + 3
+    offset = np.concatenate([[0], np.cumsum(n_cols * n_rows)[:-1]])
+    rc = ((r_uv - lo_uv) // cells[r_group][:, None]).astype(np.int64)
+    rkey = offset[r_group] + rc[:, 1] * n_cols[r_group] + rc[:, 0]
+    order = np.argsort(rkey, kind="stable")
+    qc = ((q_uv - lo_uv)[:, None, :] // cells[None, :, None]).astype(np.int64)    # (Q,G,2)
+    dy = np.array([-1, 0, 1])
+    row = qc[:, :, None, 1] + dy                                                     # (Q,G,3)
+    base = offset[None, :, None] + row * n_cols[None, :, None]
+    lo = np.where(row >= 0, base + np.maximum(qc[:, :, None, 0] - 1, 0), 1)
+    hi = np.where(row >= 0, base + qc[:, :, None, 0] + 1, 0)
+    needle, rpos = band_pairs(lo.reshape(-1), hi.reshape(-1), rkey[order])
+    return needle // (3 * n_groups), order[rpos]
+
+
 def match_in_window(q_uv: np.ndarray, q_words: np.ndarray, q_radius: np.ndarray,
                     r_uv: np.ndarray, r_words: np.ndarray, max_hamming: int, ratio: float,
-                    q_mask: np.ndarray | None = None, r_scale: np.ndarray | None = None):
+                    q_mask: np.ndarray | None = None, r_scale: np.ndarray | None = None,
+                    r_level: np.ndarray | None = None):
     """Match each query (e.g. a projected landmark) to the reference keypoint inside a circle.
 
     Candidates come from the 3x3 grid cells around the query, then a circle test; best Hamming
     distance <= max_hamming with best < ratio * second (Lowe ratio, as ORB-SLAM's
     SearchByProjection); each reference keypoint is kept for its closest query only.
     ``r_scale`` optionally widens the circle per reference keypoint (its octave scale, as
-    ORB-SLAM scales the search window with the pyramid level).
+    ORB-SLAM scales the search window with the pyramid level). With ``r_level`` (the reference
+    keypoints' pyramid levels) the ratio test applies only when the two best candidates sit on
+    the same level, as ORB-SLAM's SearchByProjection for the local map: a similar corner on
+    another level is not an ambiguity, it is the same structure at another scale.
     Returns (query indices, reference indices, distances).
     """
     n_q = len(q_uv)
@@ -143,24 +204,22 @@ def match_in_window(q_uv: np.ndarray, q_words: np.ndarray, q_radius: np.ndarray,
         return empty
     rmax = float(np.max(q_radius[sel]))
     if r_scale is None:
-        qi, rj = grid_pairs(q_uv[sel], r_uv, rmax)
+        qi, rj = grid_pairs_grouped(q_uv[sel], r_uv, np.zeros(len(r_uv), np.int64), np.array([rmax]))
     else:
         # one grid per reference scale: coarse keypoints get wide cells, fine ones narrow cells
-        qis, rjs = [], []
-        for sc in np.unique(r_scale):
-            ref = np.flatnonzero(r_scale == sc)
-            a, b = grid_pairs(q_uv[sel], r_uv[ref], rmax * float(sc))
-            qis.append(a)
-            rjs.append(ref[b])
-        qi, rj = np.concatenate(qis), np.concatenate(rjs)
+        scales, group = np.unique(r_scale, return_inverse=True)
+        qi, rj = grid_pairs_grouped(q_uv[sel], r_uv, group.reshape(-1), rmax * scales)
     qi = sel[qi]
     d2 = ((q_uv[qi] - r_uv[rj]) ** 2).sum(axis=1)
     rad = q_radius[qi] if r_scale is None else q_radius[qi] * r_scale[rj]
     ok = d2 <= rad**2
     qi, rj = qi[ok], rj[ok]
     dist = hamming_pairs(q_words, r_words, qi, rj)
-    best_ref, best_d, second_d = best_two(qi, rj, dist, n_q)
-    good = (best_ref >= 0) & (best_d <= max_hamming) & (best_d < ratio * second_d)
+    best_ref, best_d, second_d, second_r = best_two(qi, rj, dist, n_q, second_ref=True)
+    ambiguous = best_d >= ratio * second_d
+    if r_level is not None:
+        ambiguous &= (second_r >= 0) & (r_level[np.maximum(second_r, 0)] == r_level[np.maximum(best_ref, 0)])
+    good = (best_ref >= 0) & (best_d <= max_hamming) & ~ambiguous
     qsel = np.flatnonzero(good)
     rsel = best_ref[qsel]
     dsel = best_d[qsel]

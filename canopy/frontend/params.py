@@ -55,6 +55,10 @@ class TrackingParams:
     search_radius_local: float = 4.0    # px at octave 0, scaled by the keypoint's scale
     map_max_hamming: int = 75           # KITTI uses 100 (ORB-SLAM TH_HIGH): see configs/kitti.yaml
     map_ratio: float = 0.8
+    # Stage 2 applies the ratio test only when the two best keypoints sit on the same pyramid
+    # level (ORB-SLAM's SearchByProjection for the local map): the same corner found again on a
+    # neighbouring level is no ambiguity. False: the ratio test over all candidates.
+    map_ratio_same_level: bool = True
     # Landmarks are created from stereo points closer than max_depth_baselines * baseline
     # (there is no two-view triangulation here, so far points are kept too: the stereo
     # factor's disparity noise weights them correctly in BA). "Close" points, as ORB-SLAM's

@@ -19,7 +19,7 @@ from canopy.frontend.geometry import project_stereo, se3_exp, stereo_pose_jacobi
 from shared.types import StereoCalibration
 
 _MIN_DEPTH = 1e-6
-_CONVERGED_STEP = 1e-8  # |dxi| below which Gauss-Newton has converged (rad / m)
+_CONVERGED_STEP = 1e-6  # |dxi| below which Gauss-Newton has converged (rad / m: 1 µrad, 1 µm)
 
 
 @dataclass
