@@ -109,7 +109,8 @@ def apply_decision(image: np.ndarray, decision: str, params: EnhanceParams,
     out = _APPLY[base](image, params)
     if post != "dn":
         return out, 0.0
-    sigma = estimate_noise(out) if noise_sigma is None else float(noise_sigma)
+    sigma = estimate_noise(out, rows_fraction=params.noise_rows_fraction) if noise_sigma is None \
+        else float(noise_sigma)
     return denoise(out, sigma, params.denoise_radius, params.denoise_eps_factor), sigma
 
 
@@ -153,7 +154,7 @@ def auto_full(image: np.ndarray, params: EnhanceParams | None = None) -> tuple[n
         out = _APPLY[decision](image, params)
     if not dark and not params.auto_denoise_lit:
         return out, decision, 0.0
-    sigma = estimate_noise(out)
+    sigma = estimate_noise(out, rows_fraction=params.noise_rows_fraction)
     if dark:
         sigma = max(sigma, params.auto_dark_min_sigma)
     if dark or (params.auto_denoise_lit and sigma > params.auto_noise_sigma):

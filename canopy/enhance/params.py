@@ -63,6 +63,7 @@ class EnhanceParams:
     # noise-aware denoising (ours, canopy.enhance.noise): Immerkær/MAD noise σ, self-guided filter
     denoise_radius: int = 2          # px at full resolution (window 5×5)
     denoise_eps_factor: float = 2.0  # ε = (factor·σ)²: windows with std below ~2σ count as flat
+    noise_rows_fraction: float = 0.5  # the noise σ is estimated on this central band of rows (speed)
     # AFE §4.2, Eq. 18–19
     adaptive_fast: bool = True
     fast_omega: float = 128.0
@@ -78,7 +79,7 @@ class EnhanceParams:
         for name in ("omega", "t0", "tau", "wd_exponent", "low_contrast_lambda", "usm_alpha",
                      "usm_beta", "usm_sigma", "clahe_clip", "auto_dark_mean", "auto_bright_mean",
                      "auto_low_std", "auto_haze_dark", "fast_omega", "denoise_eps_factor",
-                     "auto_dehaze_max_clip", "auto_noise_sigma", "auto_dark_min_sigma"):
+                     "auto_dehaze_max_clip", "auto_noise_sigma", "auto_dark_min_sigma", "noise_rows_fraction"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
                 bad(name, "must be a finite number")
@@ -131,6 +132,8 @@ class EnhanceParams:
             bad("auto_low_std", "must be >= 0")
         if self.denoise_radius < 1:
             bad("denoise_radius", "must be >= 1")
+        if not 0.0 < self.noise_rows_fraction <= 1.0:
+            bad("noise_rows_fraction", "must be in (0, 1]")
         if not self.denoise_eps_factor > 0.0:
             bad("denoise_eps_factor", "must be > 0")
         if not self.fast_omega > 0.0:
