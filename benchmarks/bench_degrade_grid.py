@@ -102,13 +102,13 @@ def run_peer(orb, kind: str, path: Path, preprocess, max_frames) -> dict:
 
 def pair_preprocess():
     """The enhancement actor's treatment of a pair (auto), for the peer's enhanced-frames column."""
-    from canopy.enhance import EnhanceParams, make_enhancer
+    from canopy.enhance import EnhanceParams, make_enhancer, pair_arguments
 
     enhance = make_enhancer(EnhanceParams(method="auto"))
 
     def treat(left, right):
         le, info = enhance(left)
-        return le, enhance(right, method=info["method"], noise_sigma=info["noise_sigma"])[0]
+        return le, enhance(right, **pair_arguments(info))[0]
     return treat
 
 

@@ -33,11 +33,11 @@ sys.path.insert(0, str(ROOT))
 from canopy.backend import LocalMapper  # noqa: E402
 from canopy.config import load_run_config  # noqa: E402
 from canopy.degrade import disparity_sgbm  # noqa: E402
-from canopy.enhance import adaptive_fast_threshold, fallback_fast_threshold, make_enhancer  # noqa: E402
+from canopy.enhance import make_enhancer, pair_arguments, tracking_fast_arguments  # noqa: E402
 from canopy.frontend import Tracker  # noqa: E402
 from canopy.frontend.geometry import se3_inv  # noqa: E402
 from canopy.frontend.stereo import match_stereo  # noqa: E402
-from canopy.metrics import ape  # noqa: E402
+from canopy.metrics import ape, ate_sim3  # noqa: E402
 from canopy.sources import BUNDLED_DATA, open_source  # noqa: E402
 from shared.types import StereoFrame  # noqa: E402
 
@@ -52,20 +52,18 @@ def _value(text: str):
 def enhance_pair(enhancer, left, right):
     """As actors/enhancement.py: decide on the left image, the same treatment (and σ) for the right."""
     le, info = enhancer(left)
-    re, _ = enhancer(right, method=info["method"], noise_sigma=info["noise_sigma"])
+    re, _ = enhancer(right, **pair_arguments(info))
     return le, re, info
 
 
-def actor_fast(enh, info, left, rule="actor"):
-    """As actors/tracking.py: AFE Eq. 18/19 only on frames the enhancement changed.
+def actor_fast(enh, info, left, n_features, rule="actor"):
+    """As actors/tracking.py (``tracking_fast_arguments``, only for ``afe`` / ``auto``).
     ``rule`` "N": a fixed threshold N on enhanced frames instead (for experiments)."""
     if rule != "actor" and info["method"] != "none":
         return dict(fast_threshold=int(rule))
-    if enh.adaptive_fast and enh.method in ("afe", "auto") and info["method"] != "none":
-        return dict(fast_threshold=adaptive_fast_threshold(left, enh.fast_omega),
-                    fast_fallback=fallback_fast_threshold(left, enh.fast_omega),
-                    fast_min_keypoints=enh.min_keypoints)
-    return {}
+    if enh.method not in ("afe", "auto"):
+        return {}
+    return tracking_fast_arguments(left, info["method"], enh, n_features)
 
 
 def stereo_errors(tracker, frame, kwargs, ref_disp):
@@ -106,7 +104,7 @@ def run(path, clean_path, dataset, enh_sets, track_sets, max_frames=None, per_fr
         fr = src.frame(i)
         le, re, info = enhance_pair(enhancer, fr.left, fr.right)
         frame = StereoFrame(fr.index, fr.timestamp, le, re)
-        kw = actor_fast(enh, info, le, fast_rule)
+        kw = actor_fast(enh, info, le, tp.n_features, fast_rule)
         row = {"i": i, "method": info["method"], "sigma": info["noise_sigma"], "thr": kw.get("fast_threshold")}
         if stereo:
             c = clean.frame(i)
@@ -129,8 +127,11 @@ def run(path, clean_path, dataset, enh_sets, track_sets, max_frames=None, per_fr
     tracked = np.array([s in ("ok", "init") for s in statuses])
     out = {"tracked": float(tracked.mean())}
     if tracked.sum() >= 3:
-        a, s = ape(est[tracked], gt[tracked], "se3"), ape(est[tracked], gt[tracked], "sim3")
-        out.update(ate=a["rmse"], ate_sim3=s["rmse"], scale=s.get("scale"))
+        try:
+            a, s = ape(est[tracked], gt[tracked], "se3"), ate_sim3(est[tracked], gt[tracked])
+            out.update(ate=a["rmse"], ate_sim3=s["rmse"], scale=s["scale"])
+        except ValueError as exc:  # e.g. every tracked pose at one place
+            out["ate_error"] = str(exc)
     for i in range(1, len(est)):
         de, dg = se3_inv(est[i - 1]) @ est[i], se3_inv(gt[i - 1]) @ gt[i]
         tg = np.linalg.norm(dg[:3, 3])
@@ -144,7 +145,7 @@ def run(path, clean_path, dataset, enh_sets, track_sets, max_frames=None, per_fr
     if per_frame:
         for r in rows:
             print(" ".join(f"{k}={r[k]:.3f}" if isinstance(r.get(k), float) else f"{k}={r.get(k)}"
-                           for k in ["i", "status"] + keys if k in r))
+                           for k in ["i", "status", "reason"] + keys if k in r))
     return out, rows
 
 

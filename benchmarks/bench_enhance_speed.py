@@ -31,7 +31,7 @@ sys.path.insert(0, str(ROOT))
 
 from canopy.degrade import NOISE_LEVELS, DegradeParams, degrade_image  # noqa: E402
 from canopy.enhance import EnhanceParams, auto, dehaze_dark_channel, denoise, estimate_noise, make_enhancer  # noqa: E402
-from canopy.enhance.factory import METHOD_FUNCTIONS  # noqa: E402
+from canopy.enhance.factory import METHOD_FUNCTIONS, pair_arguments  # noqa: E402
 from canopy.report import write_json  # noqa: E402
 
 FRAMES = {
@@ -81,7 +81,7 @@ def main(argv=None) -> int:
 
     def auto_pair(pair):
         left, info = enhancer(pair[0])
-        return enhancer(pair[1], method=info["method"], noise_sigma=info["noise_sigma"])
+        return enhancer(pair[1], **pair_arguments(info))
 
     rows = []
     for frame_name, rel in FRAMES.items():

@@ -50,7 +50,7 @@ from canopy.enhance.common import check_image, luma, on_luma
 IMMERKAER_MASK = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)
 IMMERKAER_NORM = 6.0          # ‖N‖₂ = sqrt(1+4+1+4+16+4+1+4+1)
 MAD_TO_SIGMA = 1.0 / 0.6745   # median |x| of N(0, σ²) is 0.6745 σ
-_HIST_STEP = 0.5              # |I*N| histogram bin width (grey levels): 256 bins cover responses < 128
+_HIST_STEP = 1.0              # |I*N| histogram bin width (grey levels): 256 bins cover responses < 256
 
 
 def _downsample(image: np.ndarray, factor: int) -> np.ndarray:
