@@ -172,6 +172,8 @@ def main(argv=None) -> int:
     ap.add_argument("--noise", nargs="*", choices=tuple(NOISE_LEVELS), default=None)
     ap.add_argument("--methods", nargs="*", default=list(METHODS))
     ap.add_argument("--max-frames", type=int, default=None, help="frames per sequence (quick: 200 for presets)")
+    ap.add_argument("--peers", nargs="*", choices=("raw", "auto"), default=["raw", "auto"],
+                    help="ORB-SLAM3 columns: on raw frames, on the frames as auto enhances them")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out-dir", default=str(ROOT / "docs" / "results"))
     args = ap.parse_args(argv)
@@ -215,7 +217,8 @@ def main(argv=None) -> int:
                           f"{r['tracked_pct']} of {r['frames_total']} (processed {r['frames_processed']})  "
                           f"ATE {r['ate_rmse_m']}  {r['decisions']}", flush=True)
                 if orb is not None:
-                    for tag, pre in (("orbslam3-raw", None), ("orbslam3-auto", pair_preprocess())):
+                    peers = {"raw": ("orbslam3-raw", None), "auto": ("orbslam3-auto", pair_preprocess())}
+                    for tag, pre in (peers[k] for k in args.peers):
                         try:
                             r = run_peer(orb, kind, path, pre, max_frames)
                         except Exception as exc:  # noqa: BLE001 - a failed peer run is a row, not a crash
@@ -253,7 +256,7 @@ def main(argv=None) -> int:
                 checks.append({"dataset": d, "cell": label, "pass": bool(ok)})
                 line += "   pass" if ok else "   FAIL"
             print(line)
-    shown = list(args.methods) + (["orbslam3-raw", "orbslam3-auto"] if orb is not None else [])
+    shown = list(args.methods) + ([f"orbslam3-{k}" for k in args.peers] if orb is not None else [])
     result = {"benchmark": "bench_degrade_grid", "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
               "quick": args.quick, "datasets": list(datasets), "gains": list(gains), "betas": list(betas),
               "noise_levels": {n: {"full_well": NOISE_LEVELS[n][0], "read_noise": NOISE_LEVELS[n][1]} for n in noise},
