@@ -90,12 +90,13 @@ def stereo_errors(tracker, frame, kwargs, ref_disp):
 
 
 def run(path, clean_path, dataset, enh_sets, track_sets, max_frames=None, per_frame=False, stereo=True,
-        fast_rule="actor"):
+        fast_rule="actor", kind=None):
+    """``dataset``: the config (configs/<dataset>.yaml); ``kind``: the source layout (default ``dataset``)."""
     cfg = load_run_config(dataset)
     enh = replace(cfg.enhancement, **enh_sets)
     tp = replace(cfg.tracking, **track_sets)
-    src = open_source(dataset, path, max_frames=max_frames)
-    clean = open_source(dataset, clean_path, max_frames=max_frames)
+    src = open_source(kind or dataset, path, max_frames=max_frames)
+    clean = open_source(kind or dataset, clean_path, max_frames=max_frames)
     enhancer = make_enhancer(enh)
     tracker = Tracker(src.calibration, tp)
     mapper = LocalMapper(src.calibration, cfg.mapping)
