@@ -2,8 +2,10 @@
 
 It owns its output ring, so tracking always reads images this actor wrote.
 Both images of a pair get the same treatment (``auto`` decides on the left
-image and applies that decision, with the left image's noise σ, to the right
-one), otherwise stereo matching would compare differently processed images.
+image and applies that decision, with the left image's exposure γ and noise
+σ, to the right one), otherwise stereo matching would compare differently
+processed images; ``canopy.enhance.pair.PairEnhancer`` runs the two images'
+pixel work on two threads.
 """
 from __future__ import annotations
 
@@ -13,7 +15,7 @@ import numpy as np
 
 from actors.backlog import FrameBacklog, max_frame_age
 from actors.runtime import Actor, ActorContext
-from canopy.enhance import make_enhancer
+from canopy.enhance.pair import PairEnhancer
 from protocol.messages import EndOfStream, FrameHandle
 from shared.errors import InputError
 from shared.ring import FrameRing, SlotOverwritten
@@ -34,7 +36,7 @@ class EnhancementActor(Actor):
     def setup(self, ctx: ActorContext) -> None:
         self.in_ring = FrameRing.attach(self.config["in_ring"])
         self.out_ring = FrameRing.attach(self.config["out_ring"])
-        self.enhancer = make_enhancer(self.config["params"])
+        self.enhancer = PairEnhancer(self.config["params"])  # the two images on two threads
         self.backlog = FrameBacklog(max_frame_age(self.config["clock"], self.config["frame_period_s"],
                                                   self.config["max_lag_frames"]))
         self.methods: dict[str, int] = {}
@@ -60,8 +62,7 @@ class EnhancementActor(Actor):
         lay = self.out_ring.layout
         check_pair(left, right, lay.height, lay.width, index)
         t0 = time.perf_counter()
-        left_e, info = self.enhancer(left)
-        right_e, _ = self.enhancer(right, method=info["method"], noise_sigma=info["noise_sigma"])
+        left_e, right_e, info = self.enhancer(left, right)
         enhance_ms = (time.perf_counter() - t0) * 1e3
         check_pair(left_e, right_e, lay.height, lay.width, index)
         slot, gen = self.out_ring.write(index, stamp, [left_e, right_e])
@@ -75,5 +76,7 @@ class EnhancementActor(Actor):
         return handle.sent_at
 
     def teardown(self, ctx: ActorContext) -> None:
+        if getattr(self, "enhancer", None) is not None:
+            self.enhancer.close()
         self.in_ring.close()
         self.out_ring.close()

@@ -15,7 +15,7 @@ import numpy as np
 
 from actors.backlog import FrameBacklog, max_frame_age
 from actors.runtime import Actor, ActorContext
-from canopy.enhance import adaptive_fast_threshold, fallback_fast_threshold
+from canopy.enhance import tracking_fast_arguments
 from canopy.frontend import Tracker
 from protocol.messages import EndOfStream, FrameDone, FrameHandle, FramePose, KeyframeData, LocalMapUpdate
 from shared.errors import CanopyError
@@ -45,8 +45,8 @@ class TrackingActor(Actor):
         enh = c.get("enhancement")
         self.adaptive_fast = bool(enh is not None and getattr(enh, "adaptive_fast", False)
                                   and enh.method in ADAPTIVE_FAST_METHODS)
-        self.fast_omega = float(getattr(enh, "fast_omega", 128.0)) if enh is not None else 128.0
-        self.fast_min_keypoints = int(getattr(enh, "min_keypoints", 0)) if enh is not None else 0
+        self.enhancement = enh
+        self.n_features = int(getattr(c["params"], "n_features", 0))
         self.counts = {"ok": 0, "lost": 0, "init": 0, "predicted": 0, "keyframes": 0}
         self.loop_epoch = 0  # loop corrections received from local mapping
 
@@ -106,10 +106,10 @@ class TrackingActor(Actor):
     def _track(self, frame: StereoFrame, handle: FrameHandle, ctx: ActorContext) -> None:
         # AFE Eq. 18, and Eq. 19 when too few corners result; only on frames the enhancement changed
         # (auto's "none" frames keep the fixed threshold, so auto costs nothing on clean data)
-        if self.adaptive_fast and (handle.info or {}).get("method", "none") != "none":
-            res = self.tracker.track(frame, fast_threshold=adaptive_fast_threshold(frame.left, self.fast_omega),
-                                     fast_fallback=fallback_fast_threshold(frame.left, self.fast_omega),
-                                     fast_min_keypoints=self.fast_min_keypoints)
+        # (rule: canopy.enhance.fast.tracking_fast_arguments; denoised dark frames fill the feature budget)
+        if self.adaptive_fast:
+            res = self.tracker.track(frame, **tracking_fast_arguments(
+                frame.left, (handle.info or {}).get("method", "none"), self.enhancement, self.n_features))
         else:
             res = self.tracker.track(frame)
         self.counts[res.status] = self.counts.get(res.status, 0) + 1

@@ -74,6 +74,24 @@ def sequence_path(dataset: str, cache: Path) -> tuple[str, Path]:
     return dataset, BUNDLED_DATA[dataset]
 
 
+def run_canopy_in_process(dataset: str, path: Path, clean_path: Path, method: str, max_frames) -> dict:
+    """Tracking + local mapping in one process (``benchmarks/bench_enhance_diagnose.run``: the actors'
+    enhancement and FAST rules, no loop closing, no frame can be dropped); tracked % counts
+    frames with a tracked pose (``ok`` / ``init``, not ``predicted`` or ``lost``) of all frames,
+    ATE over those."""
+    from benchmarks.bench_enhance_diagnose import run
+
+    start = time.perf_counter()
+    config, kind = ("synthetic", "euroc") if dataset in PRESETS else (dataset, dataset)
+    out, rows = run(path, clean_path, config, {"method": method}, {}, max_frames, stereo=False, kind=kind)
+    decisions: dict[str, int] = {}
+    for r in rows:
+        decisions[r["method"]] = decisions.get(r["method"], 0) + 1
+    return {"ok": True, "tracked_pct": 100.0 * out["tracked"], "frames_total": len(rows),
+            "frames_processed": len(rows), "ate_rmse_m": out.get("ate"), "decisions": decisions,
+            "wall_s": time.perf_counter() - start, "runner": "in-process"}
+
+
 def run_canopy(dataset: str, path: Path, method: str, max_frames, workdir: Path) -> dict:
     from canopy.app import run_slam
 
@@ -102,13 +120,13 @@ def run_peer(orb, kind: str, path: Path, preprocess, max_frames) -> dict:
 
 def pair_preprocess():
     """The enhancement actor's treatment of a pair (auto), for the peer's enhanced-frames column."""
-    from canopy.enhance import EnhanceParams, make_enhancer
+    from canopy.enhance import EnhanceParams, make_enhancer, pair_arguments
 
     enhance = make_enhancer(EnhanceParams(method="auto"))
 
     def treat(left, right):
         le, info = enhance(left)
-        return le, enhance(right, method=info["method"], noise_sigma=info["noise_sigma"])[0]
+        return le, enhance(right, **pair_arguments(info))[0]
     return treat
 
 
@@ -161,6 +179,44 @@ def heat_maps(rows: list[dict], datasets, gains, betas, noise, methods, out_dir:
     return written
 
 
+def merge(paths, out_dir: Path) -> int:
+    """One JSON + heat maps from several runs of this benchmark (e.g. KITTI and EuRoC run apart)."""
+    import json
+
+    runs = [json.loads(Path(p).read_text()) for p in paths]
+    rows = [r for run in runs for r in run["rows"]]
+
+    def union(key):
+        out = []
+        for run in runs:
+            out += [v for v in run[key] if v not in out]
+        return out
+    datasets, gains, betas, methods = union("datasets"), union("gains"), union("betas"), union("methods")
+    noise = list(dict.fromkeys(n for run in runs for n in run["noise_levels"]))  # dict or list of names
+    methods = [m for m in methods if not m.startswith("orbslam3")]
+    peers = [m for m in dict.fromkeys(r["method"] for r in rows) if m.startswith("orbslam3")]
+    result = {"benchmark": "bench_degrade_grid", "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+              "merged_from": [str(p) for p in paths], "datasets": datasets, "gains": gains, "betas": betas,
+              "noise_levels": {n: {"full_well": NOISE_LEVELS[n][0], "read_noise": NOISE_LEVELS[n][1]} for n in noise},
+              "methods": methods, "orbslam3": runs[0].get("orbslam3"),
+              "criteria": {"ate_factor": ATE_FACTOR, "checks": [c for run in runs for c in run["criteria"]["checks"]]},
+              "rows": rows}
+    out_json = out_dir / "bench_degrade_grid.json"
+    write_json(out_json, result)
+    result["heat_maps"] = [str(p) for p in heat_maps(rows, datasets, gains, betas, noise, methods + peers, out_dir)]
+    print(f"wrote {write_json(out_json, result)}")
+    print(f"{'dataset':<9} {'cell':<18}" + "".join(f"{m:>20}" for m in methods + peers))
+    for d in datasets:
+        for label in dict.fromkeys(r["cell"] for r in rows if r["dataset"] == d):
+            line = f"{d:<9} {label:<18}"
+            for m in methods + peers:
+                r = next((r for r in rows if r["dataset"] == d and r["cell"] == label and r["method"] == m), {})
+                ate = r.get("ate_rmse_m")
+                line += f"{(r.get('tracked_pct') or 0):>9.0f} %, " + (f"{ate:7.4f}" if ate is not None else "      -")
+            print(line)
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true",
@@ -172,9 +228,19 @@ def main(argv=None) -> int:
     ap.add_argument("--noise", nargs="*", choices=tuple(NOISE_LEVELS), default=None)
     ap.add_argument("--methods", nargs="*", default=list(METHODS))
     ap.add_argument("--max-frames", type=int, default=None, help="frames per sequence (quick: 200 for presets)")
+    ap.add_argument("--peers", nargs="*", choices=("raw", "auto"), default=["raw", "auto"],
+                    help="ORB-SLAM3 columns: on raw frames, on the frames as auto enhances them")
+    ap.add_argument("--in-process", action="store_true",
+                    help="Canopy runs as tracking + local mapping in this process (no actors, no loop closing): "
+                         "on a machine too loaded for the actors' timeouts")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out-dir", default=str(ROOT / "docs" / "results"))
+    ap.add_argument("--merge", nargs="*", default=None, metavar="JSON",
+                    help="run nothing: combine the rows of these bench_degrade_grid.json files (e.g. one run per "
+                         "dataset) into one JSON, table and heat maps in --out-dir")
     args = ap.parse_args(argv)
+    if args.merge:
+        return merge(args.merge, Path(args.out_dir))
 
     base = QUICK if args.quick else {"datasets": DATASETS, "gains": GRID_GAINS, "betas": GRID_BETAS,
                                      "noise": tuple(NOISE_LEVELS), "max_frames": {}}
@@ -204,7 +270,8 @@ def main(argv=None) -> int:
                     label = cell.label
                     path = degrade_sequence(kind, tmp / f"{d}_{label}", cell, path=clean_path, max_frames=max_frames)
                 for m in args.methods:
-                    r = run_canopy(d, path, m, max_frames, tmp / f"{d}_{label}")
+                    r = run_canopy_in_process(d, path, clean_path, m, max_frames) if args.in_process else \
+                        run_canopy(d, path, m, max_frames, tmp / f"{d}_{label}")
                     r.update({"dataset": d, "cell": label, "method": m,
                               "gain": None if cell is None else cell.effective_gain,
                               "beta": None if cell is None else (cell.beta if cell.haze else 0.0),
@@ -215,7 +282,8 @@ def main(argv=None) -> int:
                           f"{r['tracked_pct']} of {r['frames_total']} (processed {r['frames_processed']})  "
                           f"ATE {r['ate_rmse_m']}  {r['decisions']}", flush=True)
                 if orb is not None:
-                    for tag, pre in (("orbslam3-raw", None), ("orbslam3-auto", pair_preprocess())):
+                    peers = {"raw": ("orbslam3-raw", None), "auto": ("orbslam3-auto", pair_preprocess())}
+                    for tag, pre in (peers[k] for k in args.peers):
                         try:
                             r = run_peer(orb, kind, path, pre, max_frames)
                         except Exception as exc:  # noqa: BLE001 - a failed peer run is a row, not a crash
@@ -253,7 +321,7 @@ def main(argv=None) -> int:
                 checks.append({"dataset": d, "cell": label, "pass": bool(ok)})
                 line += "   pass" if ok else "   FAIL"
             print(line)
-    shown = list(args.methods) + (["orbslam3-raw", "orbslam3-auto"] if orb is not None else [])
+    shown = list(args.methods) + ([f"orbslam3-{k}" for k in args.peers] if orb is not None else [])
     result = {"benchmark": "bench_degrade_grid", "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
               "quick": args.quick, "datasets": list(datasets), "gains": list(gains), "betas": list(betas),
               "noise_levels": {n: {"full_well": NOISE_LEVELS[n][0], "read_noise": NOISE_LEVELS[n][1]} for n in noise},

@@ -44,7 +44,7 @@ from canopy.config import load_run_config  # noqa: E402
 from canopy.degrade import degrade_image, depth_from_stereo, disparity_sgbm, grid_cells, ray_length  # noqa: E402
 from canopy.enhance import EnhanceParams, adaptive_fast_threshold, fallback_fast_threshold  # noqa: E402
 from canopy.enhance.auto import auto  # noqa: E402
-from canopy.enhance.factory import METHOD_FUNCTIONS, make_enhancer  # noqa: E402
+from canopy.enhance.factory import METHOD_FUNCTIONS, make_enhancer, pair_arguments  # noqa: E402
 from canopy.enhance.noise import denoise, estimate_noise  # noqa: E402
 from canopy.frontend.features import OrbExtractor  # noqa: E402
 from canopy.frontend.stereo import match_stereo  # noqa: E402
@@ -81,7 +81,7 @@ def candidates(params: EnhanceParams) -> dict:
 
     def auto_pair(l, r):
         le, info = enhancer(l)
-        return le, enhancer(r, method=info["method"], noise_sigma=info["noise_sigma"])[0]
+        return le, enhancer(r, **pair_arguments(info))[0]
 
     out = {m: plain(m) for m in ("none", "clahe", "afe", "agri", "dehaze")}
     for m in ("none", "clahe", "afe", "agri"):

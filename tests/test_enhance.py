@@ -425,7 +425,7 @@ def test_make_enhancer_info(method):
     enhance = make_enhancer(EnhanceParams(method=method))
     out, info = enhance(img)
     assert out.shape == img.shape and out.dtype == np.uint8
-    assert set(info) == {"method", "requested", "mean_in", "std_in", "mean_out", "std_out", "noise_sigma", "ms"}
+    assert set(info) == {"method", "requested", "mean_in", "std_in", "mean_out", "std_out", "noise_sigma", "gamma", "ms"}
     assert info["requested"] == method and info["ms"] >= 0.0
     assert info["method"] == ("afe>dn" if method == "auto" else method)  # LOL: dark and noisy
     assert (info["noise_sigma"] > 0) == (method == "auto")
@@ -552,6 +552,42 @@ def test_denoise_smooths_flat_areas_and_keeps_edges():
     profile = out[10:70].mean(axis=0)
     assert profile[57] < 75 and profile[62] > 145
     assert denoise(noisy, 0.0) is noisy
+
+
+def test_noise_estimate_on_a_central_band_agrees_with_the_whole_frame():
+    img = _read(KITTI, cv2.IMREAD_GRAYSCALE)
+    for sigma in (4.0, 12.0):
+        noisy = _with_noise(img, sigma, seed=3)
+        assert estimate_noise(noisy, rows_fraction=0.5) == pytest.approx(estimate_noise(noisy), rel=0.1)
+    with pytest.raises(ConfigError):
+        EnhanceParams(noise_rows_fraction=0.0)
+
+
+def _guided_reference(grey: np.ndarray, radius: int, eps: float, s: int) -> np.ndarray:
+    """He & Sun's fast guided filter (guide = input) in float64: coefficients on the s-times
+    block-averaged image with radius r/s (box means, replicated borders as cv2.boxFilter's
+    default reflect-101), upsampled bilinearly, q = ā·I + b̄ at full resolution."""
+    h, w = grey.shape
+    small = grey.reshape(h // s, s, w // s, s).astype(np.float64).mean(axis=(1, 3))
+    r = max(1, round(radius / s))
+    k = (2 * r + 1, 2 * r + 1)
+    mean = cv2.boxFilter(small, cv2.CV_64F, k)
+    var = cv2.boxFilter(small * small, cv2.CV_64F, k) - mean * mean
+    a = var / (var + eps)
+    b = mean - a * mean
+    a, b = (cv2.resize(cv2.boxFilter(x, cv2.CV_64F, k), (w, h), interpolation=cv2.INTER_LINEAR) for x in (a, b))
+    return np.clip(a * grey + b, 0, 255)
+
+
+def test_guided_filter_fixed_point_matches_the_float_filter():
+    from canopy.enhance.noise import guided_self_filter
+    img = _read(KITTI, cv2.IMREAD_GRAYSCALE)[:200, :400]
+    noisy = _with_noise(img, 10.0, seed=4)
+    for eps in (64.0, 400.0):
+        fast = guided_self_filter(noisy, 2, eps, 2).astype(np.float64)
+        ref = _guided_reference(noisy, 2, eps, 2)
+        err = np.abs(fast - ref)
+        assert err.max() <= 2.0 and err.mean() < 0.4, eps  # 8-bit ā, b̄ and output: each rounds by ≤ ½
 
 
 def _stereo_correct(left, right, ref_disp, adaptive: bool):

@@ -60,13 +60,20 @@ class EnhanceParams:
     auto_denoise_lit: bool = False   # also denoise well-lit frames (see canopy.enhance.auto, rule 3)
     auto_noise_sigma: float = 4.0    # with auto_denoise_lit: noise σ (grey levels) above this -> denoise
     auto_dark_min_sigma: float = 4.0  # under-exposed frames (agri) are always denoised, with σ at least this
+    auto_dark_target_mean: float = 60.0   # under-exposed frames: power curve to this mean grey before denoising (0: off)
+    auto_dark_min_gamma: float = 0.4      # ... with γ at least this (bounds the gain on the darkest levels)
     # noise-aware denoising (ours, canopy.enhance.noise): Immerkær/MAD noise σ, self-guided filter
     denoise_radius: int = 2          # px at full resolution (window 5×5)
     denoise_eps_factor: float = 2.0  # ε = (factor·σ)²: windows with std below ~2σ count as flat
+    noise_rows_fraction: float = 0.5  # the noise σ is estimated on this central band of rows (speed)
     # AFE §4.2, Eq. 18–19
     adaptive_fast: bool = True
     fast_omega: float = 128.0
     min_keypoints: int = 200  # fewer keypoints than this at Eq. 18's θ: retry with Eq. 19's θ
+    # on denoised (under-exposed) frames retry with Eq. 19 below the tracker's whole feature budget
+    # (canopy.enhance.fast.tracking_fast_arguments)
+    fill_denoised_features: bool = True
+    denoised_fallback_weight: float = 0.0  # that retry's θ: w·Eq. 18 + (1 − w)·Eq. 19
 
     def __post_init__(self):
         self.validate()
@@ -78,14 +85,16 @@ class EnhanceParams:
         for name in ("omega", "t0", "tau", "wd_exponent", "low_contrast_lambda", "usm_alpha",
                      "usm_beta", "usm_sigma", "clahe_clip", "auto_dark_mean", "auto_bright_mean",
                      "auto_low_std", "auto_haze_dark", "fast_omega", "denoise_eps_factor",
-                     "auto_dehaze_max_clip", "auto_noise_sigma", "auto_dark_min_sigma"):
+                     "auto_dehaze_max_clip", "auto_noise_sigma", "auto_dark_min_sigma", "noise_rows_fraction",
+                     "auto_dark_target_mean", "auto_dark_min_gamma",
+                     "denoised_fallback_weight"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
                 bad(name, "must be a finite number")
         for name in ("block", "n_dark_pixels", "clahe_tiles", "auto_downsample", "min_keypoints", "denoise_radius"):
             if isinstance(getattr(self, name), bool) or not isinstance(getattr(self, name), int):
                 bad(name, "must be an integer")
-        for name in ("adaptive_fast", "auto_denoise_lit"):
+        for name in ("adaptive_fast", "auto_denoise_lit", "fill_denoised_features"):
             if not isinstance(getattr(self, name), bool):
                 bad(name, "must be true or false")
         if self.auto_dark_method not in AUTO_DARK_METHODS:
@@ -131,6 +140,14 @@ class EnhanceParams:
             bad("auto_low_std", "must be >= 0")
         if self.denoise_radius < 1:
             bad("denoise_radius", "must be >= 1")
+        if not 0.0 <= self.auto_dark_target_mean <= 255.0:
+            bad("auto_dark_target_mean", "must be in [0, 255]")
+        if not 0.0 < self.auto_dark_min_gamma <= 1.0:
+            bad("auto_dark_min_gamma", "must be in (0, 1]")
+        if not 0.0 <= self.denoised_fallback_weight <= 1.0:
+            bad("denoised_fallback_weight", "must be in [0, 1]")
+        if not 0.0 < self.noise_rows_fraction <= 1.0:
+            bad("noise_rows_fraction", "must be in (0, 1]")
         if not self.denoise_eps_factor > 0.0:
             bad("denoise_eps_factor", "must be > 0")
         if not self.fast_omega > 0.0:
