@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from canopy.frontend.geometry import se3_exp
+from canopy.frontend.geometry import se3_exp, stereo_point_jacobian
 from canopy.frontend.matching import band_pairs
 from shared.types import StereoCalibration
 
@@ -74,17 +74,8 @@ def _robust_cost(r: np.ndarray, front: np.ndarray, edges: StereoEdges) -> tuple[
 
 def _jacobians(Pc: np.ndarray, R: np.ndarray, edges: StereoEdges, calib: StereoCalibration):
     """d(u,v,ur)/dxi (E,3,6) for a left perturbation of T_cam_world, and d(u,v,ur)/dX (E,3,3)."""
-    x, y, z = Pc[:, 0], Pc[:, 1], np.maximum(Pc[:, 2], _MIN_DEPTH)
-    iz = 1.0 / z
-    iz2 = iz * iz
     n = len(Pc)
-    Jp = np.zeros((n, 3, 3))
-    Jp[:, 0, 0] = calib.fx * iz
-    Jp[:, 0, 2] = -calib.fx * x * iz2
-    Jp[:, 1, 1] = calib.fy * iz
-    Jp[:, 1, 2] = -calib.fy * y * iz2
-    Jp[:, 2, 0] = calib.fx * iz
-    Jp[:, 2, 2] = -calib.fx * (x - calib.baseline) * iz2
+    Jp = stereo_point_jacobian(Pc, calib, _MIN_DEPTH)
     Jp[:, 2, :] *= edges.stereo[:, None]
     # dPc/dxi = [-[Pc]x | I]
     Jc = np.empty((n, 3, 6))

@@ -80,22 +80,32 @@ def project_stereo(T_cw: np.ndarray, X_w: np.ndarray, calib: StereoCalibration) 
     return np.stack([u, v, ur], axis=1), Pc
 
 
-def stereo_pose_jacobian(Pc: np.ndarray, calib: StereoCalibration) -> np.ndarray:
-    """(N,3,6) Jacobian of (u_l, v, u_r) w.r.t. the left perturbation xi = (omega, v) of T_cam_world.
-
-    dPc/dxi = [-[Pc]x | I]; d(u,v,ur)/dPc from Eq. 8 (ORB-SLAM's EdgeStereoSE3ProjectXYZOnlyPose).
-    """
+def stereo_point_jacobian(Pc: np.ndarray, calib: StereoCalibration, min_depth: float | None = None) -> np.ndarray:
+    """(N,3,3) Jacobian of the stereo projection (u_l, v, u_r) of AGRI Eq. 8 w.r.t. the camera-frame
+    point Pc; ``min_depth`` clamps z (a BA iterate may put a point behind the camera)."""
     x, y, z = Pc[:, 0], Pc[:, 1], Pc[:, 2]
+    if min_depth is not None:
+        z = np.maximum(z, min_depth)
     iz = 1.0 / z
     iz2 = iz * iz
-    n = len(Pc)
-    Jp = np.zeros((n, 3, 3))
+    Jp = np.zeros((len(Pc), 3, 3))
     Jp[:, 0, 0] = calib.fx * iz
     Jp[:, 0, 2] = -calib.fx * x * iz2
     Jp[:, 1, 1] = calib.fy * iz
     Jp[:, 1, 2] = -calib.fy * y * iz2
     Jp[:, 2, 0] = calib.fx * iz
     Jp[:, 2, 2] = -calib.fx * (x - calib.baseline) * iz2
+    return Jp
+
+
+def stereo_pose_jacobian(Pc: np.ndarray, calib: StereoCalibration) -> np.ndarray:
+    """(N,3,6) Jacobian of (u_l, v, u_r) w.r.t. the left perturbation xi = (omega, v) of T_cam_world.
+
+    dPc/dxi = [-[Pc]x | I]; d(u,v,ur)/dPc from Eq. 8 (ORB-SLAM's EdgeStereoSE3ProjectXYZOnlyPose).
+    """
+    x, y, z = Pc[:, 0], Pc[:, 1], Pc[:, 2]
+    n = len(Pc)
+    Jp = stereo_point_jacobian(Pc, calib)
     dP = np.zeros((n, 3, 6))
     # -[Pc]x
     dP[:, 0, 1], dP[:, 0, 2] = z, -y
