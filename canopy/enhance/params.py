@@ -46,6 +46,7 @@ class EnhanceParams:
     usm_alpha: float = 1.0
     usm_beta: float = 0.3
     usm_sigma: float = 1.0
+    afe_hist_row_step: int = 2       # Eq. 2's histogram from every n-th row (speed; 1 = every row)
     # CLAHE baseline
     clahe_clip: float = 2.0
     clahe_tiles: int = 8
@@ -91,7 +92,8 @@ class EnhanceParams:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
                 bad(name, "must be a finite number")
-        for name in ("block", "n_dark_pixels", "clahe_tiles", "auto_downsample", "min_keypoints", "denoise_radius"):
+        for name in ("block", "n_dark_pixels", "clahe_tiles", "auto_downsample", "min_keypoints", "denoise_radius",
+                     "afe_hist_row_step"):
             if isinstance(getattr(self, name), bool) or not isinstance(getattr(self, name), int):
                 bad(name, "must be an integer")
         for name in ("adaptive_fast", "auto_denoise_lit", "fill_denoised_features"):
@@ -138,6 +140,8 @@ class EnhanceParams:
                 bad(name, "must be >= 0")
         if not self.auto_low_std >= 0.0:
             bad("auto_low_std", "must be >= 0")
+        if self.afe_hist_row_step < 1:
+            bad("afe_hist_row_step", "must be >= 1")
         if self.denoise_radius < 1:
             bad("denoise_radius", "must be >= 1")
         if not 0.0 <= self.auto_dark_target_mean <= 255.0:
