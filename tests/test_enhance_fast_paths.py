@@ -121,3 +121,19 @@ def test_hist_row_step_must_be_a_positive_integer(value):
     with pytest.raises(ConfigError) as info:
         replace(EnhanceParams(), afe_hist_row_step=value)
     assert "afe_hist_row_step" in info.value.source
+
+
+@pytest.mark.parametrize("value", [0, 3, 2.0, True])
+def test_pair_threads_must_be_one_or_two(value):
+    with pytest.raises(ConfigError) as info:
+        EnhanceParams(pair_threads=value)
+    assert "pair_threads" in info.value.source
+
+
+def test_pair_enhancer_threads_follow_the_parameter():
+    for threads, parallel in ((1, False), (2, True)):
+        enh = PairEnhancer(EnhanceParams(method="auto", pair_threads=threads))
+        try:
+            assert (enh._pool is not None) == parallel
+        finally:
+            enh.close()
