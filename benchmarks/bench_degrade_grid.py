@@ -162,6 +162,9 @@ def heat_maps(rows: list[dict], datasets, gains, betas, noise, methods, out_dir:
         fig, axes = plt.subplots(len(datasets), cols, figsize=(2.6 * cols + 1, 2.2 * len(datasets) + 0.6),
                                  squeeze=False)
         for ax, (d, n, m) in zip(axes.ravel(), panels):
+            if not any(r["dataset"] == d and r["method"] == m and r["noise"] == n for r in rows):
+                ax.set_axis_off()  # this combination was not run (e.g. presets with one noise sensor)
+                continue
             grid = np.full((len(gains), len(betas)), np.nan)
             lost = np.zeros(grid.shape, bool)
             clean = next((r for r in rows if r["dataset"] == d and r["cell"] == "clean" and r["method"] == m), None)
