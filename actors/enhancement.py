@@ -4,8 +4,8 @@ It owns its output ring, so tracking always reads images this actor wrote.
 Both images of a pair get the same treatment (``auto`` decides on the left
 image and applies that decision, with the left image's exposure γ and noise
 σ, to the right one), otherwise stereo matching would compare differently
-processed images; ``canopy.enhance.pair.PairEnhancer`` runs the two images'
-pixel work on two threads.
+processed images; ``canopy.enhance.pair.PairEnhancer`` does this, with the
+two images' pixel work on two threads when ``pair_threads`` is 2.
 """
 from __future__ import annotations
 
@@ -36,7 +36,7 @@ class EnhancementActor(Actor):
     def setup(self, ctx: ActorContext) -> None:
         self.in_ring = FrameRing.attach(self.config["in_ring"])
         self.out_ring = FrameRing.attach(self.config["out_ring"])
-        self.enhancer = PairEnhancer(self.config["params"])  # the two images on two threads
+        self.enhancer = PairEnhancer(self.config["params"])  # two threads if params.pair_threads == 2
         self.backlog = FrameBacklog(max_frame_age(self.config["clock"], self.config["frame_period_s"],
                                                   self.config["max_lag_frames"]))
         self.methods: dict[str, int] = {}

@@ -119,15 +119,34 @@ def run_peer(orb, kind: str, path: Path, preprocess, max_frames) -> dict:
 
 
 def pair_preprocess():
-    """The enhancement actor's treatment of a pair (auto), for the peer's enhanced-frames column."""
-    from canopy.enhance import EnhanceParams, make_enhancer, pair_arguments
+    """The enhancement actor's treatment of a pair (auto: ``PairEnhancer``, as actors/enhancement.py runs
+    it; serial here, the peer is timed apart), for the peer's enhanced-frames column (AFE-ORB-SLAM's
+    configuration: ORB-SLAM3 on Canopy's enhanced frames)."""
+    from canopy.enhance import EnhanceParams
+    from canopy.enhance.pair import PairEnhancer
 
-    enhance = make_enhancer(EnhanceParams(method="auto"))
+    enhance = PairEnhancer(EnhanceParams(method="auto"), parallel=False)
 
     def treat(left, right):
-        le, info = enhance(left)
-        return le, enhance(right, **pair_arguments(info))[0]
+        le, re, _ = enhance(left, right)
+        return le, re
     return treat
+
+
+def degraded_cell(kind: str, dataset: str, clean_path: Path, cell, max_frames, workdir: Path,
+                  cells_cache: Path | None) -> tuple[Path, bool]:
+    """(folder of the degraded copy of ``dataset`` for ``cell``, whether it is a temporary one).
+
+    With ``cells_cache`` the copy is kept there (named by dataset, frame count, cell and seed) and
+    reused by later runs of this benchmark (e.g. the ``none`` / ORB-SLAM3-raw columns and the
+    ``auto`` columns run apart), instead of being written again and deleted."""
+    if cells_cache is None:
+        return degrade_sequence(kind, workdir / f"{dataset}_{cell.label}", cell, path=clean_path,
+                                max_frames=max_frames), True
+    out = cells_cache / f"{dataset}-{max_frames or 'all'}-{cell.label}-seed{cell.seed}"
+    if not (out / "DEGRADED.yaml").is_file():
+        degrade_sequence(kind, out, cell, path=clean_path, max_frames=max_frames, force=True)
+    return out, False
 
 
 def heat_maps(rows: list[dict], datasets, gains, betas, noise, methods, out_dir: Path) -> list[Path]:
@@ -143,6 +162,9 @@ def heat_maps(rows: list[dict], datasets, gains, betas, noise, methods, out_dir:
         fig, axes = plt.subplots(len(datasets), cols, figsize=(2.6 * cols + 1, 2.2 * len(datasets) + 0.6),
                                  squeeze=False)
         for ax, (d, n, m) in zip(axes.ravel(), panels):
+            if not any(r["dataset"] == d and r["method"] == m and r["noise"] == n for r in rows):
+                ax.set_axis_off()  # this combination was not run (e.g. presets with one noise sensor)
+                continue
             grid = np.full((len(gains), len(betas)), np.nan)
             lost = np.zeros(grid.shape, bool)
             clean = next((r for r in rows if r["dataset"] == d and r["cell"] == "clean" and r["method"] == m), None)
@@ -234,6 +256,8 @@ def main(argv=None) -> int:
                     help="Canopy runs as tracking + local mapping in this process (no actors, no loop closing): "
                          "on a machine too loaded for the actors' timeouts")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--cells-cache", default=None, metavar="DIR",
+                    help="keep the degraded copies in DIR and reuse them (e.g. $CANOPY_CACHE_DIR/degraded)")
     ap.add_argument("--out-dir", default=str(ROOT / "docs" / "results"))
     ap.add_argument("--merge", nargs="*", default=None, metavar="JSON",
                     help="run nothing: combine the rows of these bench_degrade_grid.json files (e.g. one run per "
@@ -252,6 +276,7 @@ def main(argv=None) -> int:
     orb, peer_msg = peer()
     print(f"ORB-SLAM3: {'available' if orb else 'not available'} ({peer_msg})", flush=True)
     cells = grid_cells(gains, betas, noise, seed=args.seed)
+    cells_cache = Path(args.cells_cache) if args.cells_cache else None
 
     rows = []
     start = time.time()
@@ -268,7 +293,7 @@ def main(argv=None) -> int:
                     path, label = clean_path, "clean"
                 else:
                     label = cell.label
-                    path = degrade_sequence(kind, tmp / f"{d}_{label}", cell, path=clean_path, max_frames=max_frames)
+                    path, temporary = degraded_cell(kind, d, clean_path, cell, max_frames, tmp, cells_cache)
                 for m in args.methods:
                     r = run_canopy_in_process(d, path, clean_path, m, max_frames) if args.in_process else \
                         run_canopy(d, path, m, max_frames, tmp / f"{d}_{label}")
@@ -296,7 +321,7 @@ def main(argv=None) -> int:
                         write_json(partial, {"benchmark": "bench_degrade_grid", "partial": True, "rows": rows})
                         print(f"  [{time.time() - start:5.0f} s] {d:<9} {label:<16} {tag:<13} tracked "
                               f"{r['tracked_pct']}  ATE {r['ate_rmse_m']}  {r.get('error', '')}", flush=True)
-                if cell is not None:
+                if cell is not None and temporary:
                     import shutil
                     shutil.rmtree(path, ignore_errors=True)  # degraded copies are big; keep the disk free
 

@@ -29,7 +29,12 @@ saturating ``cv2.addWeighted`` subtracts α·f and writes 8 bits. f is
 OpenCV's 8-bit Gaussian blur (fixed point, rounded), which puts the result
 within one grey level of the exact float computation (exact for the
 default integer α); full-size float temporaries cost ~1–2 ms here, a
-256×256 gather table ~0.5 ms.
+256×256 gather table ~0.5 ms. For an integer α (the default 1) the weighted sum is done as an
+int16 subtraction clipped to [0, 255] instead (identical result, ~0.1 ms instead of ~0.4 ms on a
+KITTI frame: ``addWeighted`` goes through float). The histogram of Eq. 2 is taken on every
+``afe_hist_row_step``-th row (0.12 instead of 0.25 ms; the PDF of half the rows moves the rounded
+8-bit curve by at most one grey level: on 42 dark KITTI / EuRoC frames at 2–15 % light, 0.5–1.2 %
+of the pixels changed, by one level).
 """
 from __future__ import annotations
 
@@ -63,8 +68,10 @@ def agcwd_curve(hist: np.ndarray, tau: float, exponent: float) -> np.ndarray:
 
 
 def contrast_curve(grey: np.ndarray, params: EnhanceParams) -> np.ndarray:
-    """I_ce as a 256-entry float table, dark/bright split on the mean (Eq. 7–8, 11)."""
-    hist = cv2.calcHist([grey], [0], None, [256], [0, 256]).ravel()
+    """I_ce as a 256-entry float table, dark/bright split on the mean (Eq. 7–8, 11); the PDF of
+    Eq. 2 from every ``params.afe_hist_row_step``-th row (rows stay contiguous: no copy)."""
+    step = params.afe_hist_row_step if grey.shape[0] >= 4 * params.afe_hist_row_step else 1
+    hist = cv2.calcHist([grey[::step]], [0], None, [256], [0, 256]).ravel()
     mean = float(cv2.mean(grey)[0])
     if (mean - 128.0) / 128.0 >= 0.0:                                # Eq. 7–8: bright
         # Eq. 11: the negative image's histogram is the reversed histogram;
@@ -90,8 +97,13 @@ def _agcwd_unsharp_grey(grey: np.ndarray, params: EnhanceParams) -> np.ndarray:
     blurred = cv2.GaussianBlur(grey, (ks, ks), params.usm_sigma,
                                borderType=cv2.BORDER_REFLECT_101)                      # Eq. 13, 16
     # Eq. 14–15, 17: I + α(I − f) + β T_mask = table(I) − α f: table(I) by a 16-bit LUT (rounded),
-    # then one saturating weighted sum to 8 bits (exact for integer α, else within one grey level)
+    # then − α f saturated to 8 bits (exact for integer α, else within one grey level)
     table_i = cv2.LUT(grey, np.rint(table).astype(np.int16).reshape(1, 256))
+    if float(alpha).is_integer() and 0.0 <= alpha <= 64.0:
+        # integer α: int16 arithmetic, no float pass (|table| ≤ 255·(1 + α) + 255·β and α·f ≤ 255·α fit)
+        diff = table_i - blurred if alpha == 1.0 else table_i - int(alpha) * blurred.astype(np.int16)
+        np.clip(diff, 0, 255, out=diff)
+        return diff.astype(np.uint8)
     return cv2.addWeighted(table_i, 1.0, blurred, -alpha, 0.0, dtype=cv2.CV_8U)
 
 

@@ -127,8 +127,10 @@ def guided_self_filter(grey: np.ndarray, radius: int, eps: float, subsample: int
     if s > 1:
         a8 = cv2.resize(a8, (w, h), interpolation=cv2.INTER_LINEAR)
         b8 = cv2.resize(b8, (w, h), interpolation=cv2.INTER_LINEAR)
-    q = cv2.multiply(a8, grey, scale=1.0 / 255.0, dtype=cv2.CV_16S)  # ā·I
-    return cv2.add(q, b8, dtype=cv2.CV_8U)  # + b̄, saturated to [0, 255]
+    # ā·I ≤ I ≤ 255 fits 8 bits and is rounded either way, so the product goes straight to uint8
+    # (the same pixels as a 16-bit product, ~5× cheaper), then + b̄ saturated to [0, 255]
+    q = cv2.multiply(a8, grey, scale=1.0 / 255.0)
+    return cv2.add(q, b8)
 
 
 def denoise(image: np.ndarray, sigma: float, radius: int = 2, eps_factor: float = 2.0, subsample: int = 2) -> np.ndarray:

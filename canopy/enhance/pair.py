@@ -1,4 +1,4 @@
-"""A stereo pair through the enhancement, the two images on two threads (issue 9: ≤ 4 ms a pair).
+"""A stereo pair through the enhancement, optionally the two images on two threads (issue 9: ≤ 4 ms a pair).
 
 Both images of a pair must get the same treatment (stereo matching compares them): ``auto``
 decides on the left image, and the right one gets that decision, the left image's exposure γ
@@ -31,9 +31,12 @@ class PairEnhancer:
     """``enhance(left, right) -> (left', right', info)``; ``info`` as ``make_enhancer``'s for the
     left image (decision, statistics, σ, γ), with ``ms`` the wall time of the whole pair."""
 
-    def __init__(self, params: EnhanceParams | None = None, parallel: bool = True):
+    def __init__(self, params: EnhanceParams | None = None, parallel: bool | None = None):
+        """``parallel``: the two images on two threads; None = as ``params.pair_threads`` says."""
         self.params = params or EnhanceParams()
         self.params.validate()
+        if parallel is None:
+            parallel = self.params.pair_threads > 1
         self._pool = ThreadPoolExecutor(max_workers=1) if parallel else None
 
     def close(self) -> None:

@@ -46,6 +46,7 @@ class EnhanceParams:
     usm_alpha: float = 1.0
     usm_beta: float = 0.3
     usm_sigma: float = 1.0
+    afe_hist_row_step: int = 2       # Eq. 2's histogram from every n-th row (speed; 1 = every row)
     # CLAHE baseline
     clahe_clip: float = 2.0
     clahe_tiles: int = 8
@@ -66,6 +67,11 @@ class EnhanceParams:
     denoise_radius: int = 2          # px at full resolution (window 5×5)
     denoise_eps_factor: float = 2.0  # ε = (factor·σ)²: windows with std below ~2σ count as flat
     noise_rows_fraction: float = 0.5  # the noise σ is estimated on this central band of rows (speed)
+    # threads for the two images of a pair (canopy.enhance.pair): 1 = one after the other. OpenCV
+    # already spreads the big filters over the cores, and on a busy machine (the pipeline's other
+    # actors) a second thread only adds CPU (dark KITTI pair: 5.1 vs 4.7 ms CPU at load 8); 2 pays
+    # only with an idle core (docs/enhancement-noise.md, speed)
+    pair_threads: int = 1
     # AFE §4.2, Eq. 18–19
     adaptive_fast: bool = True
     fast_omega: float = 128.0
@@ -91,7 +97,8 @@ class EnhanceParams:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
                 bad(name, "must be a finite number")
-        for name in ("block", "n_dark_pixels", "clahe_tiles", "auto_downsample", "min_keypoints", "denoise_radius"):
+        for name in ("block", "n_dark_pixels", "clahe_tiles", "auto_downsample", "min_keypoints", "denoise_radius",
+                     "afe_hist_row_step", "pair_threads"):
             if isinstance(getattr(self, name), bool) or not isinstance(getattr(self, name), int):
                 bad(name, "must be an integer")
         for name in ("adaptive_fast", "auto_denoise_lit", "fill_denoised_features"):
@@ -138,6 +145,10 @@ class EnhanceParams:
                 bad(name, "must be >= 0")
         if not self.auto_low_std >= 0.0:
             bad("auto_low_std", "must be >= 0")
+        if self.pair_threads not in (1, 2):
+            bad("pair_threads", "must be 1 or 2")
+        if self.afe_hist_row_step < 1:
+            bad("afe_hist_row_step", "must be >= 1")
         if self.denoise_radius < 1:
             bad("denoise_radius", "must be >= 1")
         if not 0.0 <= self.auto_dark_target_mean <= 255.0:
