@@ -53,6 +53,10 @@ class LoopClosingActor(Actor):
             self.closer = MonoLoopCloser(self.config["calib"], params, self.vocabulary, self.config.get("mono"))
         else:
             self.closer = LoopCloser(self.config["calib"], params, self.vocabulary)
+        if self.config.get("load_map"):  # --load-map (extending): loops can close against the loaded keyframes
+            from canopy.loop.map_io import load_map, seed_loop_closer
+            ctx.extra["loaded_keyframes"] = seed_loop_closer(self.closer, load_map(self.config["load_map"],
+                                                                                   self.config["calib"]))
         self._ba = None  # (child process, pipe, epoch of its snapshot, start time) of a running full BA
         ctx.extra.update({"loops": 0, "vocabulary": getattr(self.vocabulary, "name", "")})
 

@@ -117,6 +117,12 @@ class LoopCloser:
         self.epoch += 1
         self.epoch_corrections[self.epoch] = corrections
 
+    def add_known_keyframe(self, kf: PlaceKeyframe) -> None:
+        """A keyframe of a loaded map: pose, landmarks and database entry, no loop query."""
+        self.poses[kf.index] = np.asarray(kf.T_world_cam, float).copy()
+        self._store_landmarks(kf)
+        self.detector.add_known_keyframe(kf)
+
     def add_keyframe(self, kf: PlaceKeyframe, window_poses: dict[int, np.ndarray] | None = None,
                      epoch: int | None = None) -> LoopClosure | None:
         """``epoch``: the corrections local mapping had applied when it sent ``kf`` (None: all)."""

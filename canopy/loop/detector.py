@@ -90,14 +90,7 @@ class LoopDetector:
     def add_keyframe(self, kf: PlaceKeyframe) -> LoopConstraint | None:
         """Store ``kf`` and return a verified loop constraint if it closes one."""
         p = self.params
-        self.keyframes[kf.index] = kf
-        self.covisibility.add(kf.index, kf.landmark_ids)
-        if self._order:
-            prev = self.keyframes[self._order[-1]].T_world_cam
-            self._path[kf.index] = self._path[self._order[-1]] + float(np.linalg.norm(kf.T_world_cam[:3, 3] - prev[:3, 3]))
-        else:
-            self._path[kf.index] = 0.0
-        self._order.append(kf.index)
+        self._store(kf)
         self.stats.keyframes += 1
         constraint = None
         if len(self._order) - 1 - self._last_loop_order > p.min_keyframes_since_loop and kf.bow:
@@ -107,6 +100,23 @@ class LoopDetector:
             self._last_loop_order = len(self._order) - 1
             self._consistent_groups = []
         return constraint
+
+    def _store(self, kf: PlaceKeyframe) -> None:
+        self.keyframes[kf.index] = kf
+        self.covisibility.add(kf.index, kf.landmark_ids)
+        if self._order:
+            prev = self.keyframes[self._order[-1]].T_world_cam
+            self._path[kf.index] = self._path[self._order[-1]] + float(np.linalg.norm(kf.T_world_cam[:3, 3] - prev[:3, 3]))
+        else:
+            self._path[kf.index] = 0.0
+        self._order.append(kf.index)
+
+    def add_known_keyframe(self, kf: PlaceKeyframe) -> None:
+        """A keyframe of a loaded map (``--load-map``): stored and in the database, so later
+        keyframes can close loops against it, but not itself a query (the map it comes from
+        was already made consistent by the run that saved it)."""
+        self._store(kf)
+        self.database.add(kf.index, kf.bow, kf.line_bow, kf.stats)
 
     def _candidates(self, kf: PlaceKeyframe) -> list[int]:
         p = self.params
