@@ -17,6 +17,7 @@ carries it.
 from __future__ import annotations
 
 import multiprocessing
+import os
 import time
 
 import numpy as np
@@ -47,6 +48,8 @@ class LoopClosingActor(Actor):
 
     def setup(self, ctx: ActorContext) -> None:
         params = self.config["params"]
+        if getattr(params, "niceness", 0) > 0:  # yield the cores to tracking and local mapping (LoopParams.niceness)
+            os.nice(int(params.niceness))
         self.vocabulary = load_vocabulary(params.vocabulary)
         if self.config.get("sensor", "stereo") == "mono":  # Sim(3) verification and pose graph
             from canopy.loop.mono import MonoLoopCloser
