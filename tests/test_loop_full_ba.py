@@ -241,3 +241,16 @@ def _fused_reprojection_px(closer, fused: dict[int, int]) -> float:
             uv = np.array([CALIB.fx * Pc[0] / Pc[2] + CALIB.cx, CALIB.fy * Pc[1] / Pc[2] + CALIB.cy])
             err.append(np.linalg.norm(uv - kf.uv[i]))
     return float(np.median(err))
+
+
+def test_a_run_extending_a_loaded_map_continues_its_path_where_it_was_found(lap):
+    """The first keyframe after a loaded map counts the distance travelled from the loaded
+    keyframe nearest to it, not from the loaded map's end (re-travelling the map's last metres
+    must not add up to ``min_loop_path_m`` and let a view further down the row pass as a loop)."""
+    closer = _closer_with_lap(lap)
+    det = closer.detector
+    kf = lap["keyframes"][5]
+    new = PlaceKeyframe(index=100, timestamp=100.0, T_world_cam=lap["drifted"][5].copy(), uv=kf.uv, u_right=kf.u_right,
+                        depth=kf.depth, octave=kf.octave, descriptors=kf.descriptors, landmark_ids=kf.landmark_ids)
+    det.add_keyframe(new)
+    assert det._path[100] == det._path[5] < det._path[N_KF - 1]
