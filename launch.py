@@ -69,7 +69,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "(versioned msgpack, canopy.loop.map_io)")
     p.add_argument("--load-map", default=None, metavar="PATH",
                    help="start from a map written by --save-map: the first frames are relocalised in it "
-                        "(keyframe-database query + stereo PnP); needs --localize")
+                        "(keyframe-database query + stereo PnP), then the map is extended with this run's "
+                        "keyframes (save the union with --save-map); with --localize it is only tracked in")
     p.add_argument("--localize", action="store_true",
                    help="with --load-map: track in the loaded map without adding keyframes or changing it")
     p.add_argument("--sensor", choices=("stereo", "mono"), default=None,

@@ -151,8 +151,9 @@ class ActorRecord:
 
 class RunCollector:
     def __init__(self, n_frames: int, progress: bool = True, stream=sys.stderr, out_dir: Path | None = None,
-                 frame_stamps=None):
+                 frame_stamps=None, first_index: int = 0):
         self.n_frames = n_frames
+        self.first_index = int(first_index)  # a run extending a loaded map numbers frames after its keyframes
         self.frame_stamps = None if frame_stamps is None else np.asarray(frame_stamps, np.float64)
         self.incremental = IncrementalFiles(Path(out_dir)) if out_dir is not None else None
         self.poses: dict[int, FramePose] = {}
@@ -242,14 +243,15 @@ class RunCollector:
         """One row per frame of the sequence: tracking outcome, enhancement decision and timings,
         and for a frame without a pose, why (lost / dropped / not reached)."""
         rows = [",".join(FRAMES_COLUMNS)]
-        last = max(self.poses, default=-1)
+        first = self.first_index
+        last = max(self.poses, default=first - 1)
         loop_at = {int(lp.keyframe_index): int(lp.candidate) for lp in self.loops}  # keyframe closing a loop -> place
-        for idx in range(max(self.n_frames, last + 1)):
+        for idx in range(first, max(first + self.n_frames, last + 1)):
             p = self.poses.get(idx)
             if p is not None:
                 rows.append(frame_row(p, loop_at.get(idx)))
                 continue
-            stamp = float(self.frame_stamps[idx]) if self.frame_stamps is not None and idx < len(
+            stamp = float(self.frame_stamps[idx - first]) if self.frame_stamps is not None and idx - first < len(
                 self.frame_stamps) else None
             if idx > last and run_ended_early:
                 rows.append(missing_row(idx, stamp, STATUS_NOT_REACHED, REASON_NOT_REACHED))

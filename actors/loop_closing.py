@@ -17,6 +17,7 @@ carries it.
 from __future__ import annotations
 
 import multiprocessing
+import os
 import time
 
 import numpy as np
@@ -47,12 +48,18 @@ class LoopClosingActor(Actor):
 
     def setup(self, ctx: ActorContext) -> None:
         params = self.config["params"]
+        if getattr(params, "niceness", 0) > 0:  # yield the cores to tracking and local mapping (LoopParams.niceness)
+            os.nice(int(params.niceness))
         self.vocabulary = load_vocabulary(params.vocabulary)
         if self.config.get("sensor", "stereo") == "mono":  # Sim(3) verification and pose graph
             from canopy.loop.mono import MonoLoopCloser
             self.closer = MonoLoopCloser(self.config["calib"], params, self.vocabulary, self.config.get("mono"))
         else:
             self.closer = LoopCloser(self.config["calib"], params, self.vocabulary)
+        if self.config.get("load_map"):  # --load-map (extending): loops can close against the loaded keyframes
+            from canopy.loop.map_io import load_map, seed_loop_closer
+            ctx.extra["loaded_keyframes"] = seed_loop_closer(self.closer, load_map(self.config["load_map"],
+                                                                                   self.config["calib"]))
         self._ba = None  # (child process, pipe, epoch of its snapshot, start time) of a running full BA
         ctx.extra.update({"loops": 0, "vocabulary": getattr(self.vocabulary, "name", "")})
 

@@ -14,6 +14,7 @@ from actors.runtime import Actor, ActorContext
 from canopy.sources import open_source
 from protocol.messages import EndOfStream, FrameDone, FrameHandle, Pause, Resume, Start
 from shared.ring import FrameRing
+from shared.types import StereoFrame
 
 
 class SourceActor(Actor):
@@ -29,6 +30,7 @@ class SourceActor(Actor):
         self.stamps = self.source.timestamps
         self.period = 1.0 / max(self.source.rate_hz, 1e-6) / self.speed
         self.next_index = 0
+        self.index_base = int(c.get("index_base", 0))
         self.started = False
         self.awaiting = False
         self.t0 = 0.0
@@ -82,6 +84,8 @@ class SourceActor(Actor):
             return None
         read_at = time.time()  # end-to-end latency (frame read -> pose published) starts here
         frame = self.source.frame(i)
+        if self.index_base:  # a run extending a loaded map numbers its frames after the map's keyframes
+            frame = StereoFrame(frame.index + self.index_base, frame.timestamp, frame.left, frame.right)
         slot, gen = self.ring.write(frame.index, frame.timestamp, [frame.left, frame.right])
         ctx.send("enhancement", FrameHandle(index=frame.index, timestamp=frame.timestamp, ring=self.ring.name,
                                             slot=slot, generation=gen, sent_at=time.time(), read_at=read_at))

@@ -63,7 +63,7 @@ def default_out_dir(dataset: str) -> Path:
 def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_frames: int | None,
                       rings: dict[str, str], calib, frame_rate_hz: float,
                       record: str | None = None, save_map: str | None = None, load_map: str | None = None,
-                      localize: bool = False) -> list[ActorSpec]:
+                      localize: bool = False, first_index: int = 0) -> list[ActorSpec]:
     ep = {name: Supervisor.endpoints(run_dir, name)
           for name in ("source", "enhancement", "tracking", "local_mapping", "loop_closing", "recorder")}
     to_recorder = ["recorder"] if record else []
@@ -85,7 +85,7 @@ def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_fra
     return [
         spec("source", "actors.source:SourceActor",
              {"kind": dataset, "path": path, "max_frames": max_frames, "ring": rings["raw"],
-              "realtime_speed": rt.realtime_speed}, ["enhancement"]),
+              "realtime_speed": rt.realtime_speed, "index_base": first_index}, ["enhancement"]),
         spec("enhancement", "actors.enhancement:EnhancementActor",
              {"in_ring": rings["raw"], "out_ring": rings["enhanced"], "params": cfg.enhancement}, ["tracking"]),
         spec("tracking", "actors.tracking:TrackingActor",
@@ -102,7 +102,7 @@ def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_fra
               ("default" if loop_on else "")},
              ["tracking", *to_recorder, *to_loop]),
     ] + ([spec("loop_closing", "actors.loop_closing:LoopClosingActor",
-               {"calib": calib, "params": cfg.loop, "sensor": rt.sensor, "mono": cfg.mono},
+               {"calib": calib, "params": cfg.loop, "sensor": rt.sensor, "mono": cfg.mono, "load_map": load_map},
                ["local_mapping"])] if loop_on else []) + ([spec("recorder", "actors.recorder:RecorderActor",
                {"path": record, "ring": rings["enhanced"], "image_every": 1, "end_of_streams": 2}, [])]
          if record else [])
@@ -142,7 +142,7 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
         check_foxglove(foxglove)
     source = open_source(dataset_kind, path, max_frames=max_frames)  # validates the dataset before any process starts
     calib = source.calibration
-    load_map_path = _check_load_map(load_map, localize, calib, cfg)
+    load_map_path, first_index = _check_load_map(load_map, localize, calib, cfg)
     out_dir = prepare_out_dir(Path(out) if out else default_out_dir(dataset))
     record_path = None
     if record is not None:  # "" = the default name in the results folder
@@ -154,10 +154,10 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
     save_map_path = str(Path(save_map).resolve()) if save_map else None
     specs = build_actor_specs(run_dir, cfg, dataset_kind, path, max_frames, rings, calib, source.rate_hz,
                               record=record_path, save_map=save_map_path, load_map=load_map_path,
-                              localize=localize)
+                              localize=localize, first_index=first_index)
     # trajectory.tum and frames.csv grow as frames complete: a killed launcher still leaves them.
     collector = RunCollector(n_frames=len(source), progress=progress, out_dir=out_dir,
-                             frame_stamps=source.timestamps)
+                             frame_stamps=source.timestamps, first_index=first_index)
     run_id = f"{dataset}-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}"
     from canopy.report import to_jsonable
     from protocol.messages import RunStart
@@ -222,23 +222,23 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
     return RunResult(outcome=outcome, summary=summary, out_dir=out_dir, text=text)
 
 
-def _check_load_map(load_map: str | None, localize: bool, calib, cfg) -> str | None:
+def _check_load_map(load_map: str | None, localize: bool, calib, cfg) -> tuple[str | None, int]:
     """--load-map / --localize checked before any process starts: the map must read, match this
-    camera's calibration (one-line error otherwise) and be used by a stereo run."""
+    camera's calibration (one-line error otherwise) and be used by a stereo run. Returns the
+    map's path and the number of this run's first frame (after the loaded keyframes when the
+    run extends the map, else 0)."""
     from shared.errors import ConfigError
 
     if load_map is None:
         if localize:
             raise ConfigError("--localize", "needs --load-map PATH (the map to localise in)")
-        return None
+        return None, 0
     if cfg.runtime.sensor == "mono":
         raise ConfigError("--load-map", "loaded maps are stereo maps; not available with --sensor mono")
-    if not localize:
-        raise ConfigError("--load-map", "extending a loaded map is not available yet; add --localize to track in it "
-                                        "without changing it")
-    from canopy.loop.map_io import load_map as read_map
-    read_map(load_map, calib)  # InputError naming the file: missing, not a map, other version or calibration
-    return str(Path(load_map).resolve())
+    from canopy.loop.map_io import first_free_index, load_map as read_map
+    data = read_map(load_map, calib)  # InputError naming the file: missing, not a map, other version or calibration
+    # extending the map: this run's frames (and so its keyframes) are numbered after the loaded keyframes
+    return str(Path(load_map).resolve()), (0 if localize else first_free_index(data))
 
 
 def _map_payload(snap) -> dict:

@@ -179,3 +179,78 @@ def test_fused_landmark_is_merged_in_the_map_and_tracking_sees_the_kept_one():
     assert update.landmark_ids.tolist() == [1, 2, 4]        # the duplicate's place taken by the kept landmark
     assert np.allclose(update.positions, [[1, 1, 1], [2, 2, 2], [4, 4, 4]])
     assert len(update.descriptors) == 3 and set(update.keyframe_poses) == {0, 5}
+
+
+def _closer_with_lap(lap, **params):
+    from dataclasses import replace as dc_replace
+
+    from canopy.loop.closer import LoopCloser
+
+    closer = LoopCloser(CALIB, dc_replace(LoopParams(), full_ba=False, **params), None)
+    for k in range(N_KF):  # as a loaded map: stored, never queried
+        kf = lap["keyframes"][k]
+        P = np.array([lap["positions"][int(l)] for l in kf.landmark_ids.tolist()], float)
+        closer.add_known_keyframe(PlaceKeyframe(index=k, timestamp=float(k), T_world_cam=lap["drifted"][k].copy(),
+                                                uv=kf.uv, u_right=kf.u_right, depth=kf.depth, octave=kf.octave,
+                                                descriptors=kf.descriptors, landmark_ids=kf.landmark_ids,
+                                                landmark_positions=P))
+    return closer
+
+
+def test_fusion_before_the_pose_graph_links_the_two_ends_of_the_loop(lap):
+    """ORB-SLAM CorrectLoop order: the query side moved by the verified loop pose finds the
+    duplicates (the drifted query side is ~0.3 m off: 4 px windows would miss them), and the
+    keyframe pairs they link become loop edges of the pose graph."""
+    from canopy.loop.verify import LoopConstraint
+
+    query, cand = N_KF - 1, 0
+    constraint = LoopConstraint(query=query, candidate=cand, T_cand_query=se3_inv(lap["gt"][cand]) @ lap["gt"][query],
+                                n_matches=100, n_inliers=100, information=np.eye(6),
+                                query_keypoints=np.zeros(0, np.int64), candidate_keypoints=np.zeros(0, np.int64))
+    truth = {10000 + j: j for j in lap["duplicated"]}
+    errors = {}
+    for first in (True, False):
+        closer = _closer_with_lap(lap, fuse_before_pose_graph=first)
+        assert not closer.detector.covisibility.neighbours(query, 1).get(cand)  # the two ends share no landmark yet
+        closure = closer.close_loop(constraint)
+        assert closure.fused and all(truth.get(d) == k for d, k in closure.fused.items())  # never a wrong pair
+        assert all(d not in closer.positions for d in closure.fused)
+        errors[first] = _max_errors(closer.poses, lap["gt"])[0], _fused_reprojection_px(closer, closure.fused)
+        if first:
+            assert closure.timings_ms["loop_connections"] >= 3     # query-side x candidate-side keyframe pairs
+            assert len(closure.fused) >= 0.5 * len(truth)
+    print(f"pose graph max error / median reprojection of the kept landmarks in the query side: fused first "
+          f"{errors[True][0]:.4f} m {errors[True][1]:.2f} px, fused after {errors[False][0]:.4f} m {errors[False][1]:.2f} px")
+    # what tracking meets when the correction reaches it (before the full BA): the merged trees
+    # where the corrected keyframes at the loop's end see them
+    assert errors[True][1] < 0.5 * errors[False][1]
+    assert errors[True][0] < 0.3                                # the graph still spreads the drift
+
+
+def _fused_reprojection_px(closer, fused: dict[int, int]) -> float:
+    """Median reprojection error (px) of each kept landmark in the keyframes that observed its
+    duplicate, with the closer's corrected poses."""
+    err = []
+    for k, kf in closer.detector.keyframes.items():
+        T_cw = se3_inv(closer.poses[k])
+        for i, lid in enumerate(kf.landmark_ids.tolist()):
+            keep = fused.get(int(lid))
+            if keep is None or keep not in closer.positions:
+                continue
+            Pc = T_cw[:3, :3] @ closer.positions[keep] + T_cw[:3, 3]
+            uv = np.array([CALIB.fx * Pc[0] / Pc[2] + CALIB.cx, CALIB.fy * Pc[1] / Pc[2] + CALIB.cy])
+            err.append(np.linalg.norm(uv - kf.uv[i]))
+    return float(np.median(err))
+
+
+def test_a_run_extending_a_loaded_map_continues_its_path_where_it_was_found(lap):
+    """The first keyframe after a loaded map counts the distance travelled from the loaded
+    keyframe nearest to it, not from the loaded map's end (re-travelling the map's last metres
+    must not add up to ``min_loop_path_m`` and let a view further down the row pass as a loop)."""
+    closer = _closer_with_lap(lap)
+    det = closer.detector
+    kf = lap["keyframes"][5]
+    new = PlaceKeyframe(index=100, timestamp=100.0, T_world_cam=lap["drifted"][5].copy(), uv=kf.uv, u_right=kf.u_right,
+                        depth=kf.depth, octave=kf.octave, descriptors=kf.descriptors, landmark_ids=kf.landmark_ids)
+    det.add_keyframe(new)
+    assert det._path[100] == det._path[5] < det._path[N_KF - 1]

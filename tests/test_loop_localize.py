@@ -62,10 +62,3 @@ def test_load_map_bad_input_is_one_line(day_loop_map, tmp_path):
     with pytest.raises(CanopyError, match="another calibration"):
         run_slam("kitti", out=str(tmp_path / "c"), progress=False, load_map=str(day_loop_map["map"]), localize=True)
     assert len(load_map(day_loop_map["map"]).kf_index) == day_loop_map["n_keyframes"]
-
-
-def test_extending_a_loaded_map_is_refused_in_one_line(tmp_path):
-    from canopy.app import run_slam
-
-    with pytest.raises(CanopyError, match="--load-map.*add --localize"):
-        run_slam("kitti", out=str(tmp_path / "x"), progress=False, load_map=str(tmp_path / "any.canopy"))

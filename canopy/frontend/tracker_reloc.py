@@ -36,8 +36,8 @@ class TrackerRelocalisationMixin:
         self._place_live = bool(live)
         self._localize = bool(localize)
         self._awaiting_map = bool(loaded)
-        if loaded and len(memory.lm_ids):
-            self._next_landmark_id = max(self._next_landmark_id, int(memory.lm_ids.max()) + 1)
+        if loaded:  # new landmarks of an extending run must not take a loaded landmark's id
+            self._next_landmark_id = max(self._next_landmark_id, memory.max_landmark_id() + 1)
 
     def _db_reloc_due(self) -> bool:
         if self._place is None:

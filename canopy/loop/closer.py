@@ -117,6 +117,12 @@ class LoopCloser:
         self.epoch += 1
         self.epoch_corrections[self.epoch] = corrections
 
+    def add_known_keyframe(self, kf: PlaceKeyframe) -> None:
+        """A keyframe of a loaded map: pose, landmarks and database entry, no loop query."""
+        self.poses[kf.index] = np.asarray(kf.T_world_cam, float).copy()
+        self._store_landmarks(kf)
+        self.detector.add_known_keyframe(kf)
+
     def add_keyframe(self, kf: PlaceKeyframe, window_poses: dict[int, np.ndarray] | None = None,
                      epoch: int | None = None) -> LoopClosure | None:
         """``epoch``: the corrections local mapping had applied when it sent ``kf`` (None: all)."""
@@ -133,22 +139,34 @@ class LoopCloser:
         t_detect = (time.perf_counter() - t0) * 1e3
         if constraint is None:
             return None
+        return self.close_loop(constraint, t_detect)
+
+    def close_loop(self, constraint: LoopConstraint, t_detect: float = 0.0) -> LoopClosure:
+        """Correct the map for a verified loop: fusion and loop connections (ORB-SLAM order,
+        ``fuse_before_pose_graph``), essential-graph optimisation, landmarks moved with their
+        keyframes; a full BA is then pending."""
         t1 = time.perf_counter()
         self.loop_edges.append(PoseGraphEdge(constraint.candidate, constraint.query, self.loop_measurement(constraint),
                                              LOOP))
         before = {k: T.copy() for k, T in self.poses.items()}
+        fuse_first = self.params.fuse and self.params.fuse_before_pose_graph
+        fused, connections = self._fuse_before_pose_graph(constraint, before) if fuse_first else ({}, [])
+        t_fuse = (time.perf_counter() - t1) * 1e3
+        t1 = time.perf_counter()
         order = sorted(before)
-        edges = essential_graph_edges(order, before, self.detector.covisibility.pairs(), self.loop_edges,
+        edges = essential_graph_edges(order, before, self.detector.covisibility.pairs(), self.loop_edges + connections,
                                       self.params.essential_min_shared)
         after, corrections, errors = self.optimise(before, edges, fixed=order[0])
         self.poses = {k: T.copy() for k, T in after.items()}
         self._new_epoch(corrections)
         self._correct_positions(corrections)
         t2 = time.perf_counter()
-        fused = self._fuse(constraint) if self.params.fuse else {}
+        if self.params.fuse and not fuse_first:
+            fused = self._fuse(constraint)
+            t_fuse = (time.perf_counter() - t2) * 1e3
         closure = LoopClosure(constraint, corrections, before, after, errors,
-                              {"detect": t_detect, "pose_graph": (t2 - t1) * 1e3,
-                               "fuse": (time.perf_counter() - t2) * 1e3}, fused)
+                              {"detect": t_detect, "pose_graph": (t2 - t1) * 1e3, "fuse": t_fuse,
+                               "loop_connections": float(len(connections))}, fused)
         self.closures.append(closure)
         self.ba_pending = self.params.full_ba
         return closure
@@ -172,18 +190,54 @@ class LoopCloser:
         P = correct_landmarks(P, ref, corrections)
         self.positions = {i: P[j] for j, i in enumerate(ids)}
 
-    def _fuse(self, c: LoopConstraint) -> dict[int, int]:
-        """Merge the duplicates of the same trees seen at both ends of the loop."""
+    def _loop_sides(self, c: LoopConstraint) -> tuple[list[int], list[int]]:
         cov = self.detector.covisibility
         p = self.params
         query_side = [c.query] + cov.best(c.query, p.fuse_neighbours, p.covisibility_min_shared)
         cand_side = [c.candidate] + cov.best(c.candidate, p.fuse_neighbours, p.covisibility_min_shared)
-        cand_side = [k for k in cand_side if k not in set(query_side)]
-        fused = fuse_across_loop(self.detector.keyframes, self.poses, self.positions, query_side, cand_side,
-                                 self.calib, p, self.alias)
+        return query_side, [k for k in cand_side if k not in set(query_side)]
+
+    def _fuse(self, c: LoopConstraint, poses: dict[int, np.ndarray] | None = None) -> dict[int, int]:
+        """Merge the duplicates of the same trees seen at both ends of the loop (query side
+        seen with ``poses``, default: the closer's current poses)."""
+        query_side, cand_side = self._loop_sides(c)
+        fused = fuse_across_loop(self.detector.keyframes, self.poses if poses is None else poses, self.positions,
+                                 query_side, cand_side, self.calib, self.params, self.alias)
         for drop in fused:
             self.positions.pop(drop, None)
         return fused
+
+    def _fuse_before_pose_graph(self, c: LoopConstraint, before: dict[int, np.ndarray]):
+        """ORB-SLAM CorrectLoop before OptimizeEssentialGraph: the query and its neighbours are
+        moved rigidly to where the verified loop pose puts the query (T'_wq = T_wc T_cq), the
+        candidate side's landmarks are fused into them there, and every query-side /
+        candidate-side keyframe pair that now shares enough landmarks becomes a loop edge
+        measured between the candidate-side pose and the corrected query-side pose (ORB-SLAM's
+        LoopConnections). Returns (fusions, extra loop edges)."""
+        p = self.params
+        query_side, cand_side = self._loop_sides(c)
+        T_wq = before[c.candidate] @ c.T_cand_query
+        C = T_wq @ se3_inv(before[c.query])
+        corrected = dict(before)
+        for k in query_side:
+            if k in before:
+                corrected[k] = C @ before[k]
+        fused = self._fuse(c, corrected)
+        if not fused:
+            return fused, []
+        # landmarks of each candidate-side keyframe (after fusion), then shared counts per pair
+        cand_lms = {k: set(resolve_array(self.detector.keyframes[k].landmark_ids, self.alias).tolist()) - {-1}
+                    for k in cand_side if k in self.detector.keyframes}
+        edges = []
+        for q in query_side:
+            kf = self.detector.keyframes.get(q)
+            if kf is None or q not in corrected:
+                continue
+            mine = set(resolve_array(kf.landmark_ids, self.alias).tolist()) - {-1}
+            for k, theirs in cand_lms.items():
+                if k in before and len(mine & theirs) >= p.loop_connection_min_shared:
+                    edges.append(PoseGraphEdge(k, q, se3_inv(before[k]) @ corrected[q], LOOP))
+        return fused, edges
 
     def ba_job(self) -> dict | None:
         """What a full BA needs, as a snapshot (it may run in another process while this closer

@@ -80,6 +80,7 @@ class LoopDetector:
         self.covisibility = Covisibility()
         self._order: list[int] = []
         self._path: dict[int, float] = {}   # distance travelled up to each keyframe (m)
+        self._known: set[int] = set()       # keyframes of a loaded map (add_known_keyframe)
         self._last_loop_order = -10**9
         self._consistent_groups: list[tuple[set[int], int]] = []  # (group, consecutive count)
         self.stats = DetectionStats()
@@ -90,14 +91,7 @@ class LoopDetector:
     def add_keyframe(self, kf: PlaceKeyframe) -> LoopConstraint | None:
         """Store ``kf`` and return a verified loop constraint if it closes one."""
         p = self.params
-        self.keyframes[kf.index] = kf
-        self.covisibility.add(kf.index, kf.landmark_ids)
-        if self._order:
-            prev = self.keyframes[self._order[-1]].T_world_cam
-            self._path[kf.index] = self._path[self._order[-1]] + float(np.linalg.norm(kf.T_world_cam[:3, 3] - prev[:3, 3]))
-        else:
-            self._path[kf.index] = 0.0
-        self._order.append(kf.index)
+        self._store(kf)
         self.stats.keyframes += 1
         constraint = None
         if len(self._order) - 1 - self._last_loop_order > p.min_keyframes_since_loop and kf.bow:
@@ -107,6 +101,34 @@ class LoopDetector:
             self._last_loop_order = len(self._order) - 1
             self._consistent_groups = []
         return constraint
+
+    def _store(self, kf: PlaceKeyframe, known: bool = False) -> None:
+        self.keyframes[kf.index] = kf
+        self.covisibility.add(kf.index, kf.landmark_ids)
+        if self._order and not known and self._order[-1] in self._known:
+            # the first keyframe of a run extending a loaded map: it was found somewhere along the
+            # loaded path, not after its end; the distance travelled continues from the nearest
+            # loaded keyframe (else re-travelling the loaded map's end counts as path, and a view a
+            # few metres down the same row passed min_loop_path_m as a "loop")
+            known_kfs = list(self._known)
+            P = np.array([self.keyframes[k].T_world_cam[:3, 3] for k in known_kfs])
+            nearest = known_kfs[int(np.argmin(np.linalg.norm(P - kf.T_world_cam[:3, 3], axis=1)))]
+            self._path[kf.index] = self._path[nearest]
+        elif self._order:
+            prev = self.keyframes[self._order[-1]].T_world_cam
+            self._path[kf.index] = self._path[self._order[-1]] + float(np.linalg.norm(kf.T_world_cam[:3, 3] - prev[:3, 3]))
+        else:
+            self._path[kf.index] = 0.0
+        self._order.append(kf.index)
+        if known:
+            self._known.add(kf.index)
+
+    def add_known_keyframe(self, kf: PlaceKeyframe) -> None:
+        """A keyframe of a loaded map (``--load-map``): stored and in the database, so later
+        keyframes can close loops against it, but not itself a query (the map it comes from
+        was already made consistent by the run that saved it)."""
+        self._store(kf, known=True)
+        self.database.add(kf.index, kf.bow, kf.line_bow, kf.stats)
 
     def _candidates(self, kf: PlaceKeyframe) -> list[int]:
         p = self.params

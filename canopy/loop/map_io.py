@@ -170,3 +170,54 @@ def restore_mapper(data: MapData, mapper) -> None:
                 lm.obs[index] = i
     mapper._order = len(data.kf_index)
     mapper._segment = int(data.kf_segment.max()) if len(data.kf_segment) else -1
+    # each segment's first keyframe holds the gauge in local BA (LocalMapper._local_window)
+    mapper._segment_first = {}
+    for index, segment in zip(data.kf_index.tolist(), data.kf_segment.tolist()):
+        mapper._segment_first.setdefault(int(segment), int(index))
+
+
+def first_free_index(data: MapData) -> int:
+    """The first frame number a run extending this map can use: its keyframes are numbered by
+    frame, so the extending run's frames continue after the loaded keyframes (ids never collide
+    and sorted ids stay in time order, which the pose graph's odometry chain relies on)."""
+    return int(data.kf_index.max()) + 1 if len(data.kf_index) else 0
+
+
+def map_place_keyframes(data: MapData) -> list:
+    """The map's keyframes as place recognition keeps them (``PlaceKeyframe``, no bag of words
+    yet): stereo depth from the saved right-image u, landmark positions per keypoint."""
+    from canopy.loop.keyframe import PlaceKeyframe
+
+    cal = data.calibration
+    disparity = data.uv[:, 0] - data.u_right
+    good = (data.u_right >= 0) & (disparity > 1e-6)
+    depth = np.full(len(data.uv), -1.0)
+    depth[good] = cal.fx * cal.baseline / disparity[good]
+    order = np.argsort(data.lm_id)
+    sorted_ids = data.lm_id[order]
+    out = []
+    for k, index in enumerate(data.kf_index.tolist()):
+        rows = data.keyframe_rows(k)
+        lids = data.landmark[rows]
+        j = np.clip(np.searchsorted(sorted_ids, lids), 0, max(len(sorted_ids) - 1, 0))
+        known = (lids >= 0) & (sorted_ids[j] == lids) if len(sorted_ids) else np.zeros(len(lids), bool)
+        P = np.full((len(lids), 3), np.nan)
+        P[known] = data.lm_position[order[j[known]]]
+        out.append(PlaceKeyframe(index=int(index), timestamp=float(data.kf_timestamp[k]),
+                                 T_world_cam=data.kf_pose[k].copy(), uv=data.uv[rows].copy(),
+                                 u_right=np.where(good[rows], data.u_right[rows], -1.0), depth=depth[rows],
+                                 octave=data.octave[rows].copy(), descriptors=data.descriptors[rows].copy(),
+                                 landmark_ids=np.where(known, lids, -1), landmark_positions=P))
+    return out
+
+
+def seed_loop_closer(closer, data: MapData) -> int:
+    """Give a ``LoopCloser`` the loaded map (``--load-map`` without ``--localize``): its keyframes
+    go into the database and the pose graph, its landmarks into the closer's copy of the map, so
+    that new keyframes can close loops against them. Returns the number of keyframes added."""
+    from canopy.loop.keyframe import with_bow
+
+    kfs = map_place_keyframes(data)
+    for kf in kfs:
+        closer.add_known_keyframe(with_bow(kf, closer.vocabulary))
+    return len(kfs)

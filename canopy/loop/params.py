@@ -82,6 +82,16 @@ class LoopParams:
     fuse_neighbours: int = 10             # best covisible keyframes on each side of the loop
     fuse_radius: float = 4.0              # px search window around the projection
     fuse_max_hamming: int = 50
+    # ORB-SLAM CorrectLoop order: the query side is first moved rigidly by the verified loop
+    # pose, the duplicates are fused, and the keyframe pairs the fusion links across the loop
+    # (>= loop_connection_min_shared fused landmarks) become extra loop edges of the pose graph
+    fuse_before_pose_graph: bool = True
+    loop_connection_min_shared: int = 15
+    # --- process -------------------------------------------------------------------------
+    # the loop closer (and its full-BA child) runs at a lower CPU priority: its answers are
+    # applied whenever they arrive, so on a busy machine it should yield to tracking and
+    # local mapping rather than share the cores with them equally (0: same priority)
+    niceness: int = 5
     # --- relocalisation -------------------------------------------------------------------
     reloc_min_inliers: int = 30
     reloc_candidates: int = 5             # database candidates tried per frame, best score first
@@ -123,6 +133,8 @@ class LoopParams:
         need(self.full_ba_min_observations >= 1, "full_ba_min_observations", "must be >= 1")
         need(self.fuse_neighbours >= 0, "fuse_neighbours", "must be >= 0")
         need(self.fuse_radius > 0, "fuse_radius", "must be > 0")
+        need(self.loop_connection_min_shared >= 1, "loop_connection_min_shared", "must be >= 1")
+        need(0 <= self.niceness <= 19, "niceness", "must be in [0, 19]")
         need(0 < self.fuse_max_hamming <= 256, "fuse_max_hamming", "must be in (0, 256]")
         need(self.reloc_min_inliers >= 4, "reloc_min_inliers", "must be >= 4")
         need(self.reloc_candidates >= 1, "reloc_candidates", "must be >= 1")

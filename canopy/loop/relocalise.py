@@ -136,6 +136,11 @@ class PlaceMemory:
     def __len__(self) -> int:
         return len(self.keyframes)
 
+    def max_landmark_id(self) -> int:
+        """The largest landmark id known (-1 if none); pending position updates included."""
+        self._merge()
+        return int(self.lm_ids.max()) if len(self.lm_ids) else -1
+
     # ------------------------------------------------------------------ lookups
     def positions_of(self, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(mask of ``ids`` known, their positions)."""

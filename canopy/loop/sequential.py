@@ -77,6 +77,7 @@ def run_sequential_with_loops(source, vocabulary, tracking_params: TrackingParam
                     if ba is not None:
                         apply_global_ba(mapper, ba.corrections, ba.landmark_ids, ba.positions)
                 refresh_update(mapper, update, closer.alias)
+                update.loop_epoch = closer.epoch  # as local mapping marks a corrected update for tracking
                 if on_closure is not None:
                     on_closure(closure)
             tracker.apply_map_update(update)
