@@ -1,7 +1,8 @@
 """Source actor: reads a dataset and writes stereo frames into the raw ring.
 
-lockstep: the next frame is written only after tracking reports the previous
-one done, so every run is identical. realtime: frames are released at the
+lockstep: frame i + 1 + ``lockstep_prefetch_frames`` is written only after
+tracking reports frame i done (nothing is ever dropped, so every run is
+identical); reading and enhancing the next frames overlaps tracking. realtime: frames are released at the
 dataset's timestamps; a frame whose release time has already passed by more
 than one period when it could be read is dropped and counted, as a camera
 driver would.
@@ -30,7 +31,8 @@ class SourceActor(Actor):
         self.period = 1.0 / max(self.source.rate_hz, 1e-6) / self.speed
         self.next_index = 0
         self.started = False
-        self.awaiting = False
+        self.done = 0  # lockstep: frames tracking reported done
+        self.prefetch = int(self.config.get("lockstep_prefetch_frames", 0))
         self.t0 = 0.0
         self.sent = 0
         self.paused_at: float | None = None  # remote pause (inspection request): no frame released
@@ -49,7 +51,7 @@ class SourceActor(Actor):
 
     def on_message(self, msg, ctx: ActorContext) -> None:
         if isinstance(msg, FrameDone):
-            self.awaiting = False
+            self.done += 1
 
     def _release_time(self, i: int) -> float:
         return self.t0 + (self.stamps[i] - self.stamps[0]) / self.speed
@@ -61,7 +63,7 @@ class SourceActor(Actor):
         if not self.started or self._finished() or self.paused_at is not None:
             return None
         if self.lockstep:
-            return None if self.awaiting else 0.0
+            return None if self.sent - self.done > self.prefetch else 0.0
         if self.next_index >= len(self.source):
             return 0.0
         return self._release_time(self.next_index) - time.monotonic()
@@ -87,7 +89,6 @@ class SourceActor(Actor):
                                             slot=slot, generation=gen, sent_at=time.time(), read_at=read_at))
         self.sent += 1
         ctx.extra["frames_sent"] = self.sent
-        self.awaiting = self.lockstep
         return 0.0
 
     def teardown(self, ctx: ActorContext) -> None:
