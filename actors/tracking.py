@@ -19,7 +19,7 @@ from actors.backlog import FrameBacklog, max_frame_age
 from actors.runtime import Actor, ActorContext
 from canopy.enhance import tracking_fast_arguments
 from canopy.frontend import Tracker
-from canopy.pipeline import MapUpdateSchedule
+from canopy.pipeline import MapUpdateSchedule, effective_map_update_lag
 from protocol.messages import EndOfStream, FrameDone, FrameHandle, FramePose, KeyframeData, LocalMapUpdate
 from shared.errors import CanopyError
 from shared.ring import FrameRing, SlotOverwritten
@@ -45,8 +45,8 @@ class TrackingActor(Actor):
         self.lockstep = c["clock"] == "lockstep"
         self.backlog = FrameBacklog(max_frame_age(c["clock"], c["frame_period_s"], c["max_lag_frames"]))
         self.wait_s = float(c.get("lockstep_wait_s", 60.0))
-        # monocular initialisation and mapping expect each update before the next frame
-        lag = 0 if c.get("sensor", "stereo") == "mono" else int(c.get("map_update_lag_frames", 0))
+        lag = effective_map_update_lag(int(c.get("map_update_lag_frames", 0)), c["params"],
+                                       c.get("sensor", "stereo"))
         self.schedule = MapUpdateSchedule(lag) if self.lockstep else None
         enh = c.get("enhancement")
         self.adaptive_fast = bool(enh is not None and getattr(enh, "adaptive_fast", False)

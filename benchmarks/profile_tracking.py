@@ -36,7 +36,7 @@ from canopy.backend import LocalMapper  # noqa: E402
 from canopy.config import load_run_config  # noqa: E402
 from canopy.frontend import Tracker  # noqa: E402
 from canopy.metrics import ape  # noqa: E402
-from canopy.pipeline import MapUpdateSchedule  # noqa: E402
+from canopy.pipeline import MapUpdateSchedule, effective_map_update_lag  # noqa: E402
 from canopy.report import write_json  # noqa: E402
 from canopy.sources import open_source  # noqa: E402
 
@@ -70,7 +70,7 @@ def run_once(dataset: str, frames, calib, sets) -> dict:
             mp = replace(mp, **{field: value})
     rt.validate()
     tracker, mapper = Tracker(calib, tp), LocalMapper(calib, mp)
-    schedule = MapUpdateSchedule(rt.map_update_lag_frames)
+    schedule = MapUpdateSchedule(effective_map_update_lag(rt.map_update_lag_frames, tp))
     track_cpu, map_cpu, step_wall, stage, map_stage = [], [], [], [], []
     poses, refs, rel = [], [], []
     for frame in frames:

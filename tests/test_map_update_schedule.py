@@ -62,3 +62,12 @@ def test_bad_lag_is_rejected_with_the_key_named():
         MapUpdateSchedule(-1)
     with pytest.raises(ConfigError, match="runtime.map_update_lag_frames"):
         RuntimeParams(map_update_lag_frames=9).validate()
+
+
+def test_monocular_and_line_runs_wait_for_every_update():
+    from canopy.frontend import TrackingParams
+    from canopy.pipeline import effective_map_update_lag
+
+    assert effective_map_update_lag(1, TrackingParams()) == 1
+    assert effective_map_update_lag(1, TrackingParams(), sensor="mono") == 0
+    assert effective_map_update_lag(2, TrackingParams(use_lines=True)) == 0
