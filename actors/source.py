@@ -33,6 +33,7 @@ class SourceActor(Actor):
         self.started = False
         self.done = 0  # lockstep: frames tracking reported done
         self.prefetch = int(self.config.get("lockstep_prefetch_frames", 0))
+        self.read_error: Exception | None = None  # lockstep: raised once the frames before it are done
         self.t0 = 0.0
         self.sent = 0
         self.paused_at: float | None = None  # remote pause (inspection request): no frame released
@@ -63,12 +64,16 @@ class SourceActor(Actor):
         if not self.started or self._finished() or self.paused_at is not None:
             return None
         if self.lockstep:
+            if self.read_error is not None:
+                return None if self.done < self.sent else 0.0
             return None if self.sent - self.done > self.prefetch else 0.0
         if self.next_index >= len(self.source):
             return 0.0
         return self._release_time(self.next_index) - time.monotonic()
 
     def on_tick(self, ctx: ActorContext) -> float | None:
+        if self.read_error is not None:  # every frame before the bad one has its pose now
+            raise self.read_error
         n = len(self.source)
         if self.next_index >= n:
             ctx.send("enhancement", EndOfStream(n_frames=self.sent, sent_at=time.time()))
@@ -83,7 +88,15 @@ class SourceActor(Actor):
             ctx.dropped += 1  # too late to be useful: a live camera would have overwritten it
             return None
         read_at = time.time()  # end-to-end latency (frame read -> pose published) starts here
-        frame = self.source.frame(i)
+        try:
+            frame = self.source.frame(i)
+        except Exception as exc:
+            if not (self.lockstep and self.done < self.sent):
+                raise
+            # lockstep reads ahead of tracking: end the run only once the frames already read are
+            # tracked, so the trajectory so far is the same as without reading ahead
+            self.read_error = exc
+            return None
         slot, gen = self.ring.write(frame.index, frame.timestamp, [frame.left, frame.right])
         ctx.send("enhancement", FrameHandle(index=frame.index, timestamp=frame.timestamp, ring=self.ring.name,
                                             slot=slot, generation=gen, sent_at=time.time(), read_at=read_at))
