@@ -1,7 +1,8 @@
 """Source actor: reads a dataset and writes stereo frames into the raw ring.
 
-lockstep: the next frame is written only after tracking reports the previous
-one done, so every run is identical. realtime: frames are released at the
+lockstep: frame i + 1 + ``lockstep_prefetch_frames`` is written only after
+tracking reports frame i done (nothing is ever dropped, so every run is
+identical); reading and enhancing the next frames overlaps tracking. realtime: frames are released at the
 dataset's timestamps; a frame whose release time has already passed by more
 than one period when it could be read is dropped and counted, as a camera
 driver would.
@@ -32,7 +33,9 @@ class SourceActor(Actor):
         self.next_index = 0
         self.index_base = int(c.get("index_base", 0))
         self.started = False
-        self.awaiting = False
+        self.done = 0  # lockstep: frames tracking reported done
+        self.prefetch = int(self.config.get("lockstep_prefetch_frames", 0))
+        self.read_error: Exception | None = None  # lockstep: raised once the frames before it are done
         self.t0 = 0.0
         self.sent = 0
         self.paused_at: float | None = None  # remote pause (inspection request): no frame released
@@ -51,7 +54,7 @@ class SourceActor(Actor):
 
     def on_message(self, msg, ctx: ActorContext) -> None:
         if isinstance(msg, FrameDone):
-            self.awaiting = False
+            self.done += 1
 
     def _release_time(self, i: int) -> float:
         return self.t0 + (self.stamps[i] - self.stamps[0]) / self.speed
@@ -63,12 +66,16 @@ class SourceActor(Actor):
         if not self.started or self._finished() or self.paused_at is not None:
             return None
         if self.lockstep:
-            return None if self.awaiting else 0.0
+            if self.read_error is not None:
+                return None if self.done < self.sent else 0.0
+            return None if self.sent - self.done > self.prefetch else 0.0
         if self.next_index >= len(self.source):
             return 0.0
         return self._release_time(self.next_index) - time.monotonic()
 
     def on_tick(self, ctx: ActorContext) -> float | None:
+        if self.read_error is not None:  # every frame before the bad one has its pose now
+            raise self.read_error
         n = len(self.source)
         if self.next_index >= n:
             ctx.send("enhancement", EndOfStream(n_frames=self.sent, sent_at=time.time()))
@@ -83,7 +90,15 @@ class SourceActor(Actor):
             ctx.dropped += 1  # too late to be useful: a live camera would have overwritten it
             return None
         read_at = time.time()  # end-to-end latency (frame read -> pose published) starts here
-        frame = self.source.frame(i)
+        try:
+            frame = self.source.frame(i)
+        except Exception as exc:
+            if not (self.lockstep and self.done < self.sent):
+                raise
+            # lockstep reads ahead of tracking: end the run only once the frames already read are
+            # tracked, so the trajectory so far is the same as without reading ahead
+            self.read_error = exc
+            return None
         if self.index_base:  # a run extending a loaded map numbers its frames after the map's keyframes
             frame = StereoFrame(frame.index + self.index_base, frame.timestamp, frame.left, frame.right)
         slot, gen = self.ring.write(frame.index, frame.timestamp, [frame.left, frame.right])
@@ -91,7 +106,6 @@ class SourceActor(Actor):
                                             slot=slot, generation=gen, sent_at=time.time(), read_at=read_at))
         self.sent += 1
         ctx.extra["frames_sent"] = self.sent
-        self.awaiting = self.lockstep
         return 0.0
 
     def teardown(self, ctx: ActorContext) -> None:

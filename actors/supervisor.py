@@ -258,6 +258,11 @@ class Supervisor:
                 if isinstance(msg, ActorReady):
                     ready.add(msg.actor)
                     self.last_seen[msg.actor] = time.monotonic()
+                elif isinstance(msg, ActorStats) and msg.actor in ready:
+                    # an actor ready early keeps beating while the others import: without this its
+                    # last sign of life stays at its ready time, and on a loaded machine (others
+                    # ready > heartbeat_timeout_s later) it was called hung on the first check
+                    self.last_seen[msg.actor] = time.monotonic()
                 elif isinstance(msg, ActorError):
                     return RunOutcome(False, f"actor '{msg.actor}' failed during set-up: {msg.error}", msg.actor)
             dead = self._dead_actor()

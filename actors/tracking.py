@@ -2,8 +2,10 @@
 
 A thin loop around ``canopy.frontend.Tracker``. It keeps the tracker's
 local-map view fresh with the updates local mapping sends back; in lockstep
-it waits for the update that answers each keyframe before the next frame, so
-runs are repeatable. Each frame's pose goes to the supervisor together with
+the update answering the keyframe made at frame i is applied before frame
+i + 1 + ``map_update_lag_frames`` (waited for if it is not there yet, held if
+it came early: ``canopy.pipeline.MapUpdateSchedule``), so tracking overlaps
+local BA and runs are still repeatable. Each frame's pose goes to the supervisor together with
 its pose relative to the reference keyframe, so later corrections of that
 keyframe carry over to the frame.
 """
@@ -17,6 +19,7 @@ from actors.backlog import FrameBacklog, max_frame_age
 from actors.runtime import Actor, ActorContext
 from canopy.enhance import tracking_fast_arguments
 from canopy.frontend import Tracker
+from canopy.pipeline import MapUpdateSchedule, effective_map_update_lag
 from protocol.messages import EndOfStream, FrameDone, FrameHandle, FramePose, KeyframeData, LocalMapUpdate
 from shared.errors import CanopyError
 from shared.ring import FrameRing, SlotOverwritten
@@ -42,6 +45,9 @@ class TrackingActor(Actor):
         self.lockstep = c["clock"] == "lockstep"
         self.backlog = FrameBacklog(max_frame_age(c["clock"], c["frame_period_s"], c["max_lag_frames"]))
         self.wait_s = float(c.get("lockstep_wait_s", 60.0))
+        lag = effective_map_update_lag(int(c.get("map_update_lag_frames", 0)), c["params"],
+                                       c.get("sensor", "stereo"))
+        self.schedule = MapUpdateSchedule(lag) if self.lockstep else None
         enh = c.get("enhancement")
         self.adaptive_fast = bool(enh is not None and getattr(enh, "adaptive_fast", False)
                                   and enh.method in ADAPTIVE_FAST_METHODS)
@@ -76,7 +82,10 @@ class TrackingActor(Actor):
 
     def on_message(self, msg, ctx: ActorContext) -> None:
         if isinstance(msg, LocalMapUpdate):
-            self._apply_update(msg)
+            if self.schedule is not None:  # lockstep: applied at its fixed frame, never as it comes
+                self.schedule.hold(msg)
+            else:
+                self._apply_update(msg)
         else:
             self.backlog.push(msg)
 
@@ -100,6 +109,8 @@ class TrackingActor(Actor):
         except SlotOverwritten:
             ctx.dropped += 1
         else:
+            if self.schedule is not None:
+                self._apply_due_updates(index, ctx)
             self._track(StereoFrame(index, stamp, left, right), handle, ctx)
         return handle.sent_at
 
@@ -121,8 +132,8 @@ class TrackingActor(Actor):
             self.counts["keyframes"] += 1
             kf.loop_epoch = self.loop_epoch
             ctx.send("local_mapping", kf)
-            if self.lockstep:
-                self._wait_for_update(kf.index, ctx)
+            if self.schedule is not None:
+                self.schedule.keyframe_sent(kf.index, res.index)
         # Lost frames (no reference) keep their absolute pose: ref_keyframe = -1.
         ref = res.reference_kf_index if res.T_ref_cam is not None else -1
         T_ref_cam = res.T_ref_cam if res.T_ref_cam is not None else np.eye(4)
@@ -149,18 +160,18 @@ class TrackingActor(Actor):
         if self.lockstep:
             ctx.send("source", FrameDone(index=res.index, sent_at=time.time()))
 
-    def _wait_for_update(self, kf_index: int, ctx: ActorContext) -> None:
+    def _apply_due_updates(self, frame_index: int, ctx: ActorContext) -> None:
+        """Lockstep: apply the map updates due before ``frame_index``, waiting for any that has
+        not arrived; frames and the end of stream arriving meanwhile queue in the backlog."""
         deadline = time.monotonic() + self.wait_s
-        while time.monotonic() < deadline:
+        while (kf_index := self.schedule.missing(frame_index)) is not None:
+            if time.monotonic() >= deadline:
+                raise CanopyError(f"tracking: no map update for keyframe {kf_index} within {self.wait_s:.0f} s")
             msg = ctx.recv_inbox(100)
-            if isinstance(msg, LocalMapUpdate):
-                self._apply_update(msg)
-                if msg.keyframe_index == kf_index:
-                    return
-            elif msg is not None:
-                raise CanopyError(f"tracking: unexpected {type(msg).__name__} while waiting for the map "
-                                  f"update of keyframe {kf_index}")
-        raise CanopyError(f"tracking: no map update for keyframe {kf_index} within {self.wait_s:.0f} s")
+            if msg is not None:
+                self.on_message(msg, ctx)
+        for update in self.schedule.take_due(frame_index):
+            self._apply_update(update)
 
     def teardown(self, ctx: ActorContext) -> None:
         self.ring.close()

@@ -40,7 +40,6 @@ from canopy.config import load_run_config  # noqa: E402
 from canopy.degrade import darken  # noqa: E402
 from canopy.enhance import EnhanceParams, adaptive_fast_threshold, fallback_fast_threshold, make_enhancer  # noqa: E402
 from canopy.metrics import associate, ate_sim3  # noqa: E402
-from canopy.mono import MonoParams  # noqa: E402
 from canopy.mono.pipeline import run_mono_sequential  # noqa: E402
 from canopy.report import write_json  # noqa: E402
 from canopy.sources import open_source  # noqa: E402
@@ -114,7 +113,8 @@ def run_canopy(source, dataset: str, config: str) -> dict:
                 ep.min_keypoints)
     fast = adaptive_fast if adaptive else None
     t0 = time.perf_counter()
-    res = run_mono_sequential(src, load_run_config(dataset).tracking, MonoParams(), fast=fast)
+    cfg = load_run_config(dataset)
+    res = run_mono_sequential(src, cfg.tracking, cfg.mono, fast=fast)
     wall = time.perf_counter() - t0
     st = np.array(res.statuses)
     init = res.first_initialised

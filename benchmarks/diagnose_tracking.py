@@ -50,7 +50,7 @@ def run(dataset: str, path=None, max_frames=None, sets=(), lines=False):
             mp = replace(mp, **{name: _parse_value(val)})
     # generated sequences are EuRoC folders with their own config (configs/synthetic.yaml)
     src = open_source("euroc" if dataset == "synthetic" else dataset, path, max_frames=max_frames)
-    res = run_sequential(src, tp, mp)
+    res = run_sequential(src, tp, mp, map_update_lag=cfg.runtime.map_update_lag_frames)  # as the actors
     return src, res
 
 

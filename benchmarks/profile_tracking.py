@@ -12,7 +12,11 @@ disk reads are not counted. Prints one table and writes JSON.
 
     PYTHONPATH=$PWD python benchmarks/profile_tracking.py --dataset kitti
     PYTHONPATH=$PWD python benchmarks/profile_tracking.py --dataset euroc --reps 3 \\
-        --variant "gtsam:mapping.ba_solver=gtsam"
+        --variant "gtsam:mapping.ba_solver=gtsam" --variant "nolag:runtime.map_update_lag_frames=0"
+
+Map updates are applied as in the actors' lockstep (``canopy.pipeline.MapUpdateSchedule``,
+``runtime.map_update_lag_frames``); the in-process wall time adds mapping to tracking whatever the
+lag, so the lag's speed shows only through the actors (``launch.py``, ``bench_peers.py``).
 """
 from __future__ import annotations
 
@@ -32,6 +36,7 @@ from canopy.backend import LocalMapper  # noqa: E402
 from canopy.config import load_run_config  # noqa: E402
 from canopy.frontend import Tracker  # noqa: E402
 from canopy.metrics import ape  # noqa: E402
+from canopy.pipeline import MapUpdateSchedule, effective_map_update_lag  # noqa: E402
 from canopy.report import write_json  # noqa: E402
 from canopy.sources import open_source  # noqa: E402
 
@@ -55,17 +60,23 @@ def parse_variant(text: str) -> tuple[str, list[tuple[str, str, object]]]:
 
 def run_once(dataset: str, frames, calib, sets) -> dict:
     cfg = load_run_config(dataset)
-    tp, mp = cfg.tracking, cfg.mapping
+    tp, mp, rt = cfg.tracking, cfg.mapping, cfg.runtime
     for section, field, value in sets:
         if section == "tracking":
             tp = replace(tp, **{field: value})
+        elif section == "runtime":
+            rt = replace(rt, **{field: value})
         else:
             mp = replace(mp, **{field: value})
+    rt.validate()
     tracker, mapper = Tracker(calib, tp), LocalMapper(calib, mp)
+    schedule = MapUpdateSchedule(effective_map_update_lag(rt.map_update_lag_frames, tp))
     track_cpu, map_cpu, step_wall, stage, map_stage = [], [], [], [], []
     poses, refs, rel = [], [], []
     for frame in frames:
         w0, c0 = time.perf_counter(), time.process_time()
+        for update in schedule.take_due(frame.index):
+            tracker.apply_map_update(update)
         res = tracker.track(frame)
         track_cpu.append((time.process_time() - c0) * 1e3)
         stage.append(res.timings)
@@ -74,7 +85,8 @@ def run_once(dataset: str, frames, calib, sets) -> dict:
             update = mapper.insert_keyframe(res.keyframe)
             map_cpu.append((time.process_time() - c1) * 1e3)
             map_stage.append(update.timings)
-            tracker.apply_map_update(update)
+            schedule.keyframe_sent(res.keyframe.index, frame.index)
+            schedule.hold(update)
         step_wall.append((time.perf_counter() - w0) * 1e3)
         poses.append(res.T_world_cam.copy())
         refs.append(res.reference_kf_index)

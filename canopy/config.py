@@ -21,6 +21,7 @@ MIN_RING_SLOTS, MAX_RING_SLOTS = 2, 256
 # two periods would call a healthy actor hung on one late message.
 MIN_HEARTBEAT_TIMEOUT_S = 2.0
 SENSORS = ("stereo", "mono")
+MAX_MAP_UPDATE_LAG = 4  # tracking further ahead of its map than this only loses accuracy
 
 
 @dataclass(frozen=True)
@@ -33,6 +34,13 @@ class RuntimeParams:
     realtime_speed: float = 1.0      # 2.0 plays the dataset twice as fast
     max_lag_frames: float = 2.0      # realtime: a frame this many periods old is skipped if a newer one waits
     lockstep_wait_s: float = 60.0    # longest wait for a map update in lockstep
+    # lockstep pipelining (canopy.pipeline.MapUpdateSchedule): the local-map update answering the
+    # keyframe made at frame i is applied before frame i + 1 + lag is tracked, so tracking of the
+    # next `lag` frames overlaps that keyframe's local BA (ORB-SLAM runs them concurrently); the
+    # point of application is fixed, so runs stay repeatable. 0: wait for every update at once.
+    map_update_lag_frames: int = 1
+    # lockstep: frames the source may read (and enhancement process) ahead of tracking
+    lockstep_prefetch_frames: int = 2
     map_snapshot_period_s: float = 0.5
     seed: int = 0
     sensor: str = "stereo"           # stereo | mono (the left image only; canopy.mono)
@@ -50,6 +58,13 @@ class RuntimeParams:
             value = getattr(self, name)
             if not value > 0 or value == float("inf"):
                 raise ConfigError(f"runtime.{name}", f"must be a finite number > 0, got {value}")
+        if not 0 <= self.map_update_lag_frames <= MAX_MAP_UPDATE_LAG:
+            raise ConfigError("runtime.map_update_lag_frames",
+                              f"must be 0..{MAX_MAP_UPDATE_LAG}, got {self.map_update_lag_frames}")
+        # the source may write frame i + prefetch while tracking reads frame i from the same ring
+        if not 0 <= self.lockstep_prefetch_frames <= self.ring_slots - 2:
+            raise ConfigError("runtime.lockstep_prefetch_frames",
+                              f"must be 0..ring_slots - 2 ({self.ring_slots - 2}), got {self.lockstep_prefetch_frames}")
         if not MIN_HEARTBEAT_TIMEOUT_S <= self.heartbeat_timeout_s < float("inf"):
             raise ConfigError("runtime.heartbeat_timeout_s",
                               f"must be at least {MIN_HEARTBEAT_TIMEOUT_S:g} s (actors send a heartbeat every "

@@ -111,6 +111,11 @@ def _wait_nan(tmp):
     return _config(tmp, "runtime:\n  lockstep_wait_s: .nan\n"), "runtime.lockstep_wait_s"
 
 
+def _prefetch_overruns_ring(tmp):  # the source would overwrite a slot tracking has not read yet
+    return (_config(tmp, "runtime:\n  ring_slots: 4\n  lockstep_prefetch_frames: 3\n"),
+            "runtime.lockstep_prefetch_frames: must be 0..ring_slots - 2 (2), got 3")
+
+
 def _inspect_malformed(tmp):
     return ["--inspect", "tcp://localhost"], "expected tcp://HOST:PORT"
 
@@ -196,7 +201,7 @@ def _missing_dataset(tmp):
 
 
 CASES = [_out_is_file, _out_under_file, _out_cannot_be_created, _out_not_writable, _section_is_list,
-         _heartbeat_zero, _grace_negative, _ring_slots_huge, _wait_nan, _inspect_malformed, _inspect_bad_scheme,
+         _heartbeat_zero, _grace_negative, _ring_slots_huge, _wait_nan, _prefetch_overruns_ring, _inspect_malformed, _inspect_bad_scheme,
          _inspect_unknown_host, _inspect_port_in_use, _inspect_public_without_keys, _inspect_keys_folder_empty, _tiny_images, _kitti_nan_focal, _euroc_nan_intrinsics,
          _euroc_listed_image_missing, _zero_byte_first_image, _mismatched_pair, _max_frames_zero,
          _missing_dataset]

@@ -155,6 +155,19 @@ def test_lockstep_runs_are_identical_across_processes(tmp_path):
     assert len(a) == len(b) == 20
     diff = [(i, x, y) for i, (x, y) in enumerate(zip(a, b)) if x != y]
     assert not diff, f"{len(diff)} poses differ, first: {diff[0]}"
+    # ... and it is the in-process reference's trajectory, with the same pipelining: tracking
+    # overlaps local BA yet applies each map update before the same frame (MapUpdateSchedule)
+    from canopy.config import load_run_config
+    from canopy.pipeline import run_sequential
+    from canopy.sources import open_source
+    from canopy.trajectory_io import read_tum
+
+    cfg = load_run_config("kitti")
+    assert cfg.runtime.map_update_lag_frames >= 1  # the default pipelines
+    ref = run_sequential(open_source("kitti", max_frames=20), cfg.tracking, cfg.mapping,
+                         map_update_lag=cfg.runtime.map_update_lag_frames)
+    got = read_tum(tmp_path / "run0" / "trajectory.tum").poses
+    assert np.abs(got[:, :3, 3] - ref.trajectory.poses[:, :3, 3]).max() < 1e-6
 
 
 def test_kitti_run_is_accurate_through_the_actors(tmp_path):

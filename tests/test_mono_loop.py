@@ -200,8 +200,9 @@ def test_lost_mono_tracker_relocalises_into_the_same_map_on_kitti():
 
     src = open_source("kitti", max_frames=12)
     voc = load_vocabulary()
-    mono = MonoParams()
-    tracker = MonoTracker(src.calibration, load_run_config("kitti").tracking, mono)
+    cfg = load_run_config("kitti")
+    mono = cfg.mono  # the shipped config: mono.n_features 2000 where stereo runs 1600
+    tracker = MonoTracker(src.calibration, cfg.tracking, mono)
     mapper = MonoMapper(src.calibration, mono)
     closer = MonoLoopCloser(src.calibration, LoopParams(), voc, mono)
     tracker.relocaliser = make_mono_relocaliser(closer, mapper, voc)

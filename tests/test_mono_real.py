@@ -14,7 +14,8 @@ from canopy.sources import open_source
 @pytest.fixture(scope="module")
 def kitti_mono():
     src = open_source("kitti")
-    return src, run_mono_sequential(src, load_run_config("kitti").tracking, MonoParams())
+    cfg = load_run_config("kitti")  # the shipped config: mono.n_features 2000 where stereo runs 1600
+    return src, run_mono_sequential(src, cfg.tracking, cfg.mono)
 
 
 def test_kitti06_mono_initialises_tracks_and_sim3_ate_below_half_metre(kitti_mono):

@@ -20,7 +20,7 @@ States: not initialised -> ok <-> lost (-> not initialised again after
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -102,6 +102,8 @@ class MonoTracker:
         self.calib = calib
         self.params = (params or TrackingParams()).validate()
         self.mono = (mono or MonoParams()).validate()
+        if self.mono.n_features:  # the monocular feature count (MonoParams.n_features)
+            self.params = replace(self.params, n_features=self.mono.n_features)
         self.extractor = OrbExtractor(self.params)
         self.scale_factors = self.params.scale_factor ** np.arange(self.params.n_levels)
         self.K = calib.K
