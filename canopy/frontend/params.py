@@ -44,7 +44,7 @@ class TrackingParams:
     # SAD per pixel / image noise sigma) falls from sad_snr_high to sad_snr_low. Equal factors: off.
     sad_outlier_factor_noisy: float = 1.5
     sad_snr_low: float = 1.5
-    sad_snr_high: float = 3.5
+    sad_snr_high: float = 4.5
     # Constant disparity offset of the rectified rig, px: d_true = d_measured + disparity_offset_px
     # (a right principal point off by a fraction of a pixel). Measure it without ground truth with
     # benchmarks/calibrate_disparity_offset.py (canopy.frontend.disparity_offset).
