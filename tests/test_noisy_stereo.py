@@ -3,7 +3,9 @@
 A real KITTI 06 pair from the project's ``data/`` is hazed (β 0.06 /m, depth from SGBM on the
 clean pair) and given the grid's noisy sensor; the tracker's own ORB + stereo matching must
 put fewer matches off the clean pair's disparity with the noise-aware rule than with
-ORB-SLAM's fixed factor, and leave the clean pair's matches almost untouched.
+ORB-SLAM's fixed factor, and leave the clean pair's matches almost untouched. (The rule is off by
+default, ``sad_outlier_factor_noisy`` = ``sad_outlier_factor``: it costs the generated orchard's
+clean frames accuracy; these tests switch it on.)
 """
 from __future__ import annotations
 
@@ -28,7 +30,7 @@ FRAMES = (5, 20, 35)
 
 
 def test_sad_acceptance_factor_falls_with_the_snr():
-    p = TrackingParams()
+    p = TrackingParams(sad_outlier_factor_noisy=1.5)  # the rule is off by default (docs/notes/s4-dark.md)
     n = (2 * p.subpixel_window + 1) ** 2
     assert sad_acceptance_factor(1000.0, None, p) == p.sad_outlier_factor            # no noise estimate
     assert sad_acceptance_factor(10 * n * 5.0, 5.0, p) == p.sad_outlier_factor      # SNR 10: ORB-SLAM's rule
@@ -36,7 +38,7 @@ def test_sad_acceptance_factor_falls_with_the_snr():
     mid = sad_acceptance_factor(3.0 * n * 5.0, 5.0, p)
     assert p.sad_outlier_factor_noisy < mid < p.sad_outlier_factor
     assert sad_snr(3.0 * n * 5.0, p.subpixel_window, 5.0) == pytest.approx(3.0)
-    off = TrackingParams(sad_outlier_factor_noisy=2.1)
+    off = TrackingParams()
     assert sad_acceptance_factor(1.0 * n * 5.0, 5.0, off) == off.sad_outlier_factor  # equal factors: off
     for bad in ({"sad_outlier_factor_noisy": 3.0}, {"sad_outlier_factor_noisy": 0.0},
                 {"sad_snr_low": 5.0, "sad_snr_high": 4.0}):
@@ -59,7 +61,7 @@ def _bad_fraction(params, calib, left, right, ref_disp, noise_aware: bool):
 
 def test_noise_aware_sad_acceptance_rejects_wrong_depths_on_hazy_noisy_pairs_only():
     src = open_source("kitti", KITTI)
-    params = replace(load_run_config("kitti").tracking, parallel_extraction=False)
+    params = replace(load_run_config("kitti").tracking, parallel_extraction=False, sad_outlier_factor_noisy=1.5)
     cell = DegradeParams(mode="haze+noise", beta=0.06, full_well=NOISE_LEVELS["high"][0],
                          read_noise=NOISE_LEVELS["high"][1])
     totals = {k: np.zeros(3, int) for k in ("clean_fixed", "clean_aware", "hazy_fixed", "hazy_aware")}
