@@ -18,6 +18,7 @@ import numpy as np
 
 from canopy.frontend.features import Features
 from canopy.frontend.matching import as_words, band_pairs, best_two, hamming_pairs, unique_by_reference
+from canopy.frontend.noisy_features import accept_sad
 from canopy.frontend.params import TrackingParams
 from shared.types import StereoCalibration
 
@@ -106,7 +107,10 @@ def subpixel_refine(left_img: np.ndarray, right_img: np.ndarray, uvl: np.ndarray
 
 
 def match_stereo(left: Features, right: Features, left_img: np.ndarray, right_img: np.ndarray,
-                 calib: StereoCalibration, params: TrackingParams) -> StereoMatches:
+                 calib: StereoCalibration, params: TrackingParams,
+                 noise_sigma: float | None = None) -> StereoMatches:
+    """``noise_sigma``: the left image's noise (track_health.image_noise_sigma); with it the SAD
+    outlier test is stricter on low-SNR (hazy, noisy) frames (canopy.frontend.noisy_features)."""
     n = len(left)
     u_right = np.full(n, -1.0, np.float32)
     depth = np.full(n, -1.0, np.float32)
@@ -141,7 +145,7 @@ def match_stereo(left: Features, right: Features, left_img: np.ndarray, right_im
     ok = (disp >= params.min_disparity) & (disp <= max_disp)
     li, ur, sad, disp = li[ok], ur[ok], sad[ok], disp[ok]
     if len(sad):
-        ok = sad <= params.sad_outlier_factor * np.median(sad)
+        ok = accept_sad(sad, params, noise_sigma)
         li, ur, disp = li[ok], ur[ok], disp[ok]
     u_right[li] = ur
     depth[li] = calib.bf / disp

@@ -221,7 +221,7 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin, TrackerRelocalisationMixin):
             right = self.extractor_right.extract(frame.right, fast_threshold, fast_fallback, fast_min_keypoints)
         timings["orb"] = _ms(t0)
         t0 = time.perf_counter()
-        stereo = match_stereo(left, right, frame.left, frame.right, self.calib, self.params)
+        stereo = match_stereo(left, right, frame.left, frame.right, self.calib, self.params, noise_sigma)
         timings["stereo"] = _ms(t0)
         n_stereo = int(stereo.valid.sum())
 
