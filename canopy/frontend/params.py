@@ -28,6 +28,9 @@ class TrackingParams:
     grid_cols: int = 16
     grid_rows: int = 8
     oversample: float = 1.6
+    # OpenCV reports a level-L keypoint at x_L * s, the pyramid (cv2.resize) puts it at
+    # (x_L + 0.5) s - 0.5: shift keypoints by 0.5 (s - 1) px (canopy.frontend.keypoint_centres)
+    centre_level_keypoints: bool = True
 
     # --- stereo matching on rectified rows (AGRI §3.2.2; ORB-SLAM2 ComputeStereoMatches)
     stereo_max_hamming: int = 75        # (TH_HIGH + TH_LOW) / 2 of ORB-SLAM2

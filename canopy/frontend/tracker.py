@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from canopy.frontend.features import Features, OrbExtractor
+from canopy.frontend.keypoint_centres import centre_keypoints
 from canopy.frontend.keyframe_policy import entropy_ratio, keyframe_reasons
 from canopy.frontend.geometry import (differential_entropy, pose_information, se3_inv, stereo_pose_jacobian,
                                       transform)
@@ -202,6 +203,8 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin, TrackerRelocalisationMixin):
         timings["orb"] = _ms(t0)
         t0 = time.perf_counter()
         stereo = match_stereo(left, right, frame.left, frame.right, self.calib, self.params)
+        if self.params.centre_level_keypoints:  # OpenCV's pyramid coordinates -> pixel centres
+            left, stereo = centre_keypoints(left, stereo, self.scale_factors, self.calib.width, self.calib.height)
         timings["stereo"] = _ms(t0)
         n_stereo = int(stereo.valid.sum())
 
