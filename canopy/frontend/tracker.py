@@ -66,12 +66,21 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin, TrackerRelocalisationMixin):
         self._initial_pose = np.eye(4) if initial_pose is None else np.asarray(initial_pose, float)
         self._max_depth = self.params.max_depth_baselines * calib.baseline
         self._close_depth = self.params.close_depth_baselines * calib.baseline
+        # ORB-SLAM's ThDepth role for measurements: beyond it a stereo point's depth is too noisy
+        # (and sub-pixel disparities biased) to measure translation; bearing only
+        self._stereo_obs_depth = (self.params.stereo_obs_max_depth_baselines * calib.baseline
+                                  if self.params.stereo_obs_max_depth_baselines > 0 else np.inf)
         # map view = last update + provisional landmarks of keyframes not yet acknowledged
         self._update_view = MapView()
         self._provisional: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._view = MapView()
         self._view_dirty = False
         self._next_landmark_id = 0
+        # ORB-SLAM's viewing direction and scale-invariance distance of each landmark this tracker
+        # created (indexed by id; 0 distance: unknown), for the frustum test of the local-map search
+        self._lm_normal = np.zeros((0, 3))
+        self._lm_max_dist = np.zeros(0)
+        self._stereo_last = self._stereo_obs = None
         self._segment_start_kf = -1
         # motion state
         self._initialised = False
@@ -171,6 +180,63 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin, TrackerRelocalisationMixin):
     def _close(self, stereo: StereoMatches) -> np.ndarray:
         return stereo.valid & (stereo.depth < self._close_depth)
 
+    def _bearing_only_far(self, stereo: StereoMatches) -> StereoMatches:
+        """The measurements pose refinement and BA see: stereo points beyond the stereo
+        measurement depth lose their right-image column (monocular, bearing only); their depth
+        still initialises landmarks."""
+        if not np.isfinite(self._stereo_obs_depth):
+            return stereo
+        far = stereo.valid & (stereo.depth >= self._stereo_obs_depth)
+        if not far.any():
+            return stereo
+        return StereoMatches(np.where(far, -1.0, stereo.u_right).astype(np.float32),
+                             np.where(far, -1.0, stereo.depth).astype(np.float32), stereo.n_candidates)
+
+    def _keyframe_u_right(self, stereo: StereoMatches) -> np.ndarray:
+        """Right-image columns for BA: -1 (monocular edge) beyond the stereo measurement depth."""
+        far = stereo.valid & (stereo.depth >= self._stereo_obs_depth)
+        return np.where(far, -1.0, stereo.u_right).astype(np.float32)
+
+    def _refine(self, T_cw, X, r, feats, stereo, inliers=None, line_obs=None):
+        # far points as monocular measurements (see _bearing_only_far)
+        obs = self._stereo_obs if stereo is self._stereo_last else stereo
+        return super()._refine(T_cw, X, r, feats, obs, inliers=inliers, line_obs=line_obs)
+
+    def _record_viewing(self, ids: np.ndarray, pos: np.ndarray, centre: np.ndarray, octave: np.ndarray) -> None:
+        """ORB-SLAM's MapPoint normal and max distance (UpdateNormalAndDepth) at creation:
+        the unit ray from the creating camera, and distance x scale^octave."""
+        if len(ids) == 0:
+            return
+        need = int(ids.max()) + 1
+        if need > len(self._lm_max_dist):
+            cap = max(need, 2 * len(self._lm_max_dist), 1024)
+            self._lm_normal = np.concatenate([self._lm_normal, np.zeros((cap - len(self._lm_normal), 3))])
+            self._lm_max_dist = np.concatenate([self._lm_max_dist, np.zeros(cap - len(self._lm_max_dist))])
+        ray = pos - centre
+        dist = np.linalg.norm(ray, axis=1)
+        self._lm_normal[ids] = ray / np.maximum(dist, 1e-9)[:, None]
+        self._lm_max_dist[ids] = dist * self.scale_factors[octave]
+
+    def _in_frustum(self, T_wc: np.ndarray, ids: np.ndarray, pos: np.ndarray) -> np.ndarray:
+        """ORB-SLAM's isInFrustum beyond the image bounds: the landmark is seen within
+        ``view_max_angle_deg`` of the direction it was created from and at a distance its
+        descriptor's scale range covers (0.8 min .. 1.2 max). Landmarks this tracker did not
+        create (a loaded map) pass."""
+        p = self.params
+        ok = np.ones(len(ids), bool)
+        if p.view_max_angle_deg >= 180 or len(ids) == 0:
+            return ok
+        known = (ids >= 0) & (ids < len(self._lm_max_dist))
+        k = np.flatnonzero(known)
+        k = k[self._lm_max_dist[ids[k]] > 0]
+        ray = pos[k] - T_wc[:3, 3]
+        dist = np.linalg.norm(ray, axis=1)
+        cos = np.einsum("ij,ij->i", ray, self._lm_normal[ids[k]]) / np.maximum(dist, 1e-9)
+        dmax = self._lm_max_dist[ids[k]]
+        dmin = dmax / self.scale_factors[-1]
+        ok[k] = (cos >= np.cos(np.radians(p.view_max_angle_deg))) & (dist >= 0.8 * dmin) & (dist <= 1.2 * dmax)
+        return ok
+
     # ------------------------------------------------------------------ main entry
     def track(self, frame: StereoFrame, fast_threshold: int | None = None,
               fast_fallback: int | None = None, fast_min_keypoints: int = 0) -> TrackingResult:
@@ -205,6 +271,7 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin, TrackerRelocalisationMixin):
         stereo = match_stereo(left, right, frame.left, frame.right, self.calib, self.params)
         if self.params.centre_level_keypoints:  # OpenCV's pyramid coordinates -> pixel centres
             left, stereo = centre_keypoints(left, stereo, self.scale_factors, self.calib.width, self.calib.height)
+        self._stereo_last, self._stereo_obs = stereo, self._bearing_only_far(stereo)
         timings["stereo"] = _ms(t0)
         n_stereo = int(stereo.valid.sum())
 
@@ -297,6 +364,7 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin, TrackerRelocalisationMixin):
         new_ids[idx] = self._next_landmark_id + np.arange(len(idx))
         self._next_landmark_id += len(idx)
         pos = self._stereo_points_world(feats, stereo, T_wc, idx)
+        self._record_viewing(new_ids[idx], pos, T_wc[:3, 3], feats.octave[idx])
         self._provisional[frame.index] = (new_ids[idx], pos, feats.descriptors[idx])
         self._view_dirty = True
         uids, seen_visible, seen_found = seen_counts(self._seen)
@@ -304,7 +372,7 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin, TrackerRelocalisationMixin):
         line_fields = {} if lines is None else self._keyframe_lines(frame, lines, line_matched, T_wc)
         kf = KeyframeData(
             index=frame.index, timestamp=frame.timestamp, T_world_cam=T_wc.copy(),
-            uv=feats.uv.astype(np.float32), u_right=stereo.u_right.astype(np.float32),
+            uv=feats.uv.astype(np.float32), u_right=self._keyframe_u_right(stereo),
             depth=stereo.depth.astype(np.float32), descriptors=feats.descriptors.copy(),
             octave=feats.octave.astype(np.int32), landmark_ids=matched_ids.copy(), new_landmark_ids=new_ids,
             scale_factor=self.params.scale_factor, restart=restart,
@@ -387,9 +455,11 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin, TrackerRelocalisationMixin):
                 T_cw = est.T_cam_world
                 est = None
             # stage 2 (TrackLocalMap): all local-map points through the RANSAC pose, small window
-            q2, r2, in_view = self._search(T_cw, view.pos, view.words, feats, kp_words, p.search_radius_local,
-                                           scaled=True)
-            visible_ids = view.ids[in_view]
+            sub = np.flatnonzero(self._in_frustum(se3_inv(T_cw), view.ids, view.pos))
+            q2, r2, in_view = self._search(T_cw, view.pos[sub], view.words[sub], feats, kp_words,
+                                           p.search_radius_local, scaled=True)
+            q2 = sub[q2]
+            visible_ids = view.ids[sub[in_view]]
             if len(q2) + n_lines >= p.min_inliers:
                 est = self._refine(T_cw, view.pos[q2], r2, feats, stereo, line_obs=line_obs)
                 if self._n_support(est) >= p.min_inliers:
