@@ -46,9 +46,6 @@ class TrackingParams:
     # (a right principal point off by a fraction of a pixel). Measure it without ground truth with
     # benchmarks/calibrate_disparity_offset.py (canopy.frontend.disparity_offset).
     disparity_offset_px: float = 0.0
-    # Left-right check (canopy.frontend.stereo_check): the right patch searched back along the
-    # left row must land within this many level pixels of the left keypoint; 0: no check
-    stereo_lr_tolerance: float = 0.0
 
     # --- temporal matching against the local map -----------------------------------
     # Stage 1 (ORB-SLAM TrackWithMotionModel): project the local map with the constant-velocity
@@ -164,7 +161,6 @@ class TrackingParams:
         need(self.row_tolerance >= 0, "row_tolerance", "must be >= 0")
         need(self.subpixel_window >= 1, "subpixel_window", "must be >= 1")
         need(self.subpixel_search >= 1, "subpixel_search", "must be >= 1")
-        need(self.stereo_lr_tolerance >= 0, "stereo_lr_tolerance", "must be >= 0 (0: no check)")
         need(abs(self.disparity_offset_px) < 5, "disparity_offset_px", "must be within +-5 px")
         need(self.search_radius > 0, "search_radius", "must be > 0")
         need(self.search_radius_wide >= self.search_radius, "search_radius_wide", "must be >= search_radius")

@@ -25,7 +25,6 @@ import numpy as np
 
 from canopy.frontend.features import Features, OrbExtractor
 from canopy.frontend.keypoint_centres import centre_keypoints
-from canopy.frontend.stereo_check import drop_inconsistent, left_right_consistent
 from canopy.frontend.keyframe_policy import entropy_ratio, keyframe_reasons
 from canopy.frontend.geometry import (differential_entropy, pose_information, se3_inv, stereo_pose_jacobian,
                                       transform)
@@ -270,9 +269,6 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin, TrackerRelocalisationMixin):
         timings["orb"] = _ms(t0)
         t0 = time.perf_counter()
         stereo = match_stereo(left, right, frame.left, frame.right, self.calib, self.params)
-        if self.params.stereo_lr_tolerance > 0:  # silhouettes: no fixed 3D point (stereo_check)
-            stereo = drop_inconsistent(stereo, left_right_consistent(left, stereo, frame.left, frame.right,
-                                                                     self.params))
         if self.params.centre_level_keypoints:  # OpenCV's pyramid coordinates -> pixel centres
             left, stereo = centre_keypoints(left, stereo, self.scale_factors, self.calib.width, self.calib.height)
         self._stereo_last, self._stereo_obs = stereo, self._bearing_only_far(stereo)
