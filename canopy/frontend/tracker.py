@@ -13,7 +13,9 @@ Where things are:
   ``canopy.frontend.map_tracking.MapTrackingMixin``;
 * the keyframe policy (AGRI Eq. 6-7 and ORB-SLAM's conditions): ``canopy.frontend.keyframe_policy``;
 * trust in a pose, lost reasons, the noise-scaled FAST threshold: ``canopy.frontend.track_health``;
-* line features: ``canopy.frontend.tracker_lines.TrackerLinesMixin``.
+* line features: ``canopy.frontend.tracker_lines.TrackerLinesMixin``;
+* far points as bearing-only measurements, the frustum test of the local-map search:
+  ``canopy.frontend.tracker_measurements.TrackerMeasurementsMixin``.
 """
 from __future__ import annotations
 
@@ -37,6 +39,7 @@ from canopy.frontend.stereo import StereoMatches, match_stereo
 from canopy.frontend.track_health import (LOST_TOO_FEW_MATCHES, LOST_TOO_FEW_STEREO, image_noise_sigma,
                                           judge_pose)
 from canopy.frontend.tracker_lines import TrackerLinesMixin
+from canopy.frontend.tracker_measurements import TrackerMeasurementsMixin
 from canopy.frontend.tracker_reloc import TrackerRelocalisationMixin
 from shared.types import StereoCalibration, StereoFrame
 
@@ -52,7 +55,7 @@ def _ms(t0: float) -> float:
     return (time.perf_counter() - t0) * 1e3
 
 
-class Tracker(MapTrackingMixin, TrackerLinesMixin, TrackerRelocalisationMixin):
+class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, TrackerRelocalisationMixin):
     def __init__(self, calib: StereoCalibration, params: TrackingParams | None = None,
                  initial_pose: np.ndarray | None = None):
         self.calib = calib
@@ -179,63 +182,6 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin, TrackerRelocalisationMixin):
 
     def _close(self, stereo: StereoMatches) -> np.ndarray:
         return stereo.valid & (stereo.depth < self._close_depth)
-
-    def _bearing_only_far(self, stereo: StereoMatches) -> StereoMatches:
-        """The measurements pose refinement and BA see: stereo points beyond the stereo
-        measurement depth lose their right-image column (monocular, bearing only); their depth
-        still initialises landmarks."""
-        if not np.isfinite(self._stereo_obs_depth):
-            return stereo
-        far = stereo.valid & (stereo.depth >= self._stereo_obs_depth)
-        if not far.any():
-            return stereo
-        return StereoMatches(np.where(far, -1.0, stereo.u_right).astype(np.float32),
-                             np.where(far, -1.0, stereo.depth).astype(np.float32), stereo.n_candidates)
-
-    def _keyframe_u_right(self, stereo: StereoMatches) -> np.ndarray:
-        """Right-image columns for BA: -1 (monocular edge) beyond the stereo measurement depth."""
-        far = stereo.valid & (stereo.depth >= self._stereo_obs_depth)
-        return np.where(far, -1.0, stereo.u_right).astype(np.float32)
-
-    def _refine(self, T_cw, X, r, feats, stereo, inliers=None, line_obs=None):
-        # far points as monocular measurements (see _bearing_only_far)
-        obs = self._stereo_obs if stereo is self._stereo_last else stereo
-        return super()._refine(T_cw, X, r, feats, obs, inliers=inliers, line_obs=line_obs)
-
-    def _record_viewing(self, ids: np.ndarray, pos: np.ndarray, centre: np.ndarray, octave: np.ndarray) -> None:
-        """ORB-SLAM's MapPoint normal and max distance (UpdateNormalAndDepth) at creation:
-        the unit ray from the creating camera, and distance x scale^octave."""
-        if len(ids) == 0:
-            return
-        need = int(ids.max()) + 1
-        if need > len(self._lm_max_dist):
-            cap = max(need, 2 * len(self._lm_max_dist), 1024)
-            self._lm_normal = np.concatenate([self._lm_normal, np.zeros((cap - len(self._lm_normal), 3))])
-            self._lm_max_dist = np.concatenate([self._lm_max_dist, np.zeros(cap - len(self._lm_max_dist))])
-        ray = pos - centre
-        dist = np.linalg.norm(ray, axis=1)
-        self._lm_normal[ids] = ray / np.maximum(dist, 1e-9)[:, None]
-        self._lm_max_dist[ids] = dist * self.scale_factors[octave]
-
-    def _in_frustum(self, T_wc: np.ndarray, ids: np.ndarray, pos: np.ndarray) -> np.ndarray:
-        """ORB-SLAM's isInFrustum beyond the image bounds: the landmark is seen within
-        ``view_max_angle_deg`` of the direction it was created from and at a distance its
-        descriptor's scale range covers (0.8 min .. 1.2 max). Landmarks this tracker did not
-        create (a loaded map) pass."""
-        p = self.params
-        ok = np.ones(len(ids), bool)
-        if p.view_max_angle_deg >= 180 or len(ids) == 0:
-            return ok
-        known = (ids >= 0) & (ids < len(self._lm_max_dist))
-        k = np.flatnonzero(known)
-        k = k[self._lm_max_dist[ids[k]] > 0]
-        ray = pos[k] - T_wc[:3, 3]
-        dist = np.linalg.norm(ray, axis=1)
-        cos = np.einsum("ij,ij->i", ray, self._lm_normal[ids[k]]) / np.maximum(dist, 1e-9)
-        dmax = self._lm_max_dist[ids[k]]
-        dmin = dmax / self.scale_factors[-1]
-        ok[k] = (cos >= np.cos(np.radians(p.view_max_angle_deg))) & (dist >= 0.8 * dmin) & (dist <= 1.2 * dmax)
-        return ok
 
     # ------------------------------------------------------------------ main entry
     def track(self, frame: StereoFrame, fast_threshold: int | None = None,
