@@ -62,6 +62,7 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         timings["insert"] = _ms(t0)
         t0 = time.perf_counter()
         local, fixed = self._local_window(rec)
+        self.last_window = (local, fixed)  # for diagnosis (benchmarks/diagnose_drift.py)
         timings["window"] = _ms(t0)
         t0 = time.perf_counter()
         if len(local) >= 1 and (len(fixed) >= 1 or len(local) >= 2):

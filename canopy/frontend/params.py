@@ -28,6 +28,9 @@ class TrackingParams:
     grid_cols: int = 16
     grid_rows: int = 8
     oversample: float = 1.6
+    # OpenCV reports a level-L keypoint at x_L * s, the pyramid (cv2.resize) puts it at
+    # (x_L + 0.5) s - 0.5: shift keypoints by 0.5 (s - 1) px (canopy.frontend.keypoint_centres)
+    centre_level_keypoints: bool = False
 
     # --- stereo matching on rectified rows (AGRI §3.2.2; ORB-SLAM2 ComputeStereoMatches)
     stereo_max_hamming: int = 75        # (TH_HIGH + TH_LOW) / 2 of ORB-SLAM2
@@ -73,7 +76,15 @@ class TrackingParams:
     # factor's disparity noise weights them correctly in BA). "Close" points, as ORB-SLAM's
     # ThDepth, drive the keyframe condition on tracked close points.
     max_depth_baselines: float = 150.0
+    # ORB-SLAM's isInFrustum for the local-map search: a landmark is searched for only when seen
+    # within this angle of the ray it was created from (ORB-SLAM: 60 deg) and within its
+    # descriptor's scale range; 180 switches the test off
+    view_max_angle_deg: float = 180.0
     close_depth_baselines: float = 40.0
+    # Stereo points farther than this are measured as monocular (bearing only) in the pose
+    # refinement and in local BA: their disparity (a pixel or two) fixes no translation, and a
+    # sub-pixel bias would; their stereo depth only initialises the landmark. 0: no limit.
+    stereo_obs_max_depth_baselines: float = 0.0
 
     # --- motion estimation (AGRI §3.2.3: EPnP in RANSAC, then motion-only refinement)
     pnp_reprojection_error: float = 3.0  # px, RANSAC inlier threshold
@@ -169,6 +180,7 @@ class TrackingParams:
         need(0 < self.map_ratio <= 1, "map_ratio", "must be in (0, 1]")
         need(self.max_depth_baselines > 0, "max_depth_baselines", "must be > 0")
         need(self.close_depth_baselines > 0, "close_depth_baselines", "must be > 0")
+        need(self.stereo_obs_max_depth_baselines >= 0, "stereo_obs_max_depth_baselines", "must be >= 0 (0: no limit)")
         need(self.pnp_reprojection_error > 0, "pnp_reprojection_error", "must be > 0")
         need(self.pnp_iterations > 0, "pnp_iterations", "must be > 0")
         need(0 < self.pnp_confidence < 1, "pnp_confidence", "must be in (0, 1)")

@@ -13,7 +13,9 @@ Where things are:
   ``canopy.frontend.map_tracking.MapTrackingMixin``;
 * the keyframe policy (AGRI Eq. 6-7 and ORB-SLAM's conditions): ``canopy.frontend.keyframe_policy``;
 * trust in a pose, lost reasons, the noise-scaled FAST threshold: ``canopy.frontend.track_health``;
-* line features: ``canopy.frontend.tracker_lines.TrackerLinesMixin``.
+* line features: ``canopy.frontend.tracker_lines.TrackerLinesMixin``;
+* far points as bearing-only measurements, the frustum test of the local-map search:
+  ``canopy.frontend.tracker_measurements.TrackerMeasurementsMixin``.
 """
 from __future__ import annotations
 
@@ -24,6 +26,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from canopy.frontend.features import Features, OrbExtractor
+from canopy.frontend.keypoint_centres import centre_keypoints
 from canopy.frontend.keyframe_policy import entropy_ratio, keyframe_reasons
 from canopy.frontend.geometry import (differential_entropy, pose_information, se3_inv, stereo_pose_jacobian,
                                       transform)
@@ -36,6 +39,7 @@ from canopy.frontend.stereo import StereoMatches, match_stereo
 from canopy.frontend.track_health import (LOST_TOO_FEW_MATCHES, LOST_TOO_FEW_STEREO, image_noise_sigma,
                                           judge_pose)
 from canopy.frontend.tracker_lines import TrackerLinesMixin
+from canopy.frontend.tracker_measurements import TrackerMeasurementsMixin
 from canopy.frontend.tracker_reloc import TrackerRelocalisationMixin
 from shared.types import StereoCalibration, StereoFrame
 
@@ -63,7 +67,7 @@ def _refreshed_matches(last_matched, ids, positions):
     return np.asarray(positions, float)[order][j[found]], words[found], lids[found]
 
 
-class Tracker(MapTrackingMixin, TrackerLinesMixin, TrackerRelocalisationMixin):
+class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, TrackerRelocalisationMixin):
     def __init__(self, calib: StereoCalibration, params: TrackingParams | None = None,
                  initial_pose: np.ndarray | None = None):
         self.calib = calib
@@ -77,12 +81,21 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin, TrackerRelocalisationMixin):
         self._initial_pose = np.eye(4) if initial_pose is None else np.asarray(initial_pose, float)
         self._max_depth = self.params.max_depth_baselines * calib.baseline
         self._close_depth = self.params.close_depth_baselines * calib.baseline
+        # ORB-SLAM's ThDepth role for measurements: beyond it a stereo point's depth is too noisy
+        # (and sub-pixel disparities biased) to measure translation; bearing only
+        self._stereo_obs_depth = (self.params.stereo_obs_max_depth_baselines * calib.baseline
+                                  if self.params.stereo_obs_max_depth_baselines > 0 else np.inf)
         # map view = last update + provisional landmarks of keyframes not yet acknowledged
         self._update_view = MapView()
         self._provisional: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._view = MapView()
         self._view_dirty = False
         self._next_landmark_id = 0
+        # ORB-SLAM's viewing direction and scale-invariance distance of each landmark this tracker
+        # created (indexed by id; 0 distance: unknown), for the frustum test of the local-map search
+        self._lm_normal = np.zeros((0, 3))
+        self._lm_max_dist = np.zeros(0)
+        self._stereo_last = self._stereo_obs = None
         self._segment_start_kf = -1
         # motion state
         self._initialised = False
@@ -222,6 +235,9 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin, TrackerRelocalisationMixin):
         timings["orb"] = _ms(t0)
         t0 = time.perf_counter()
         stereo = match_stereo(left, right, frame.left, frame.right, self.calib, self.params, noise_sigma)
+        if self.params.centre_level_keypoints:  # OpenCV's pyramid coordinates -> pixel centres
+            left, stereo = centre_keypoints(left, stereo, self.scale_factors, self.calib.width, self.calib.height)
+        self._stereo_last, self._stereo_obs = stereo, self._bearing_only_far(stereo)
         timings["stereo"] = _ms(t0)
         n_stereo = int(stereo.valid.sum())
 
@@ -314,6 +330,7 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin, TrackerRelocalisationMixin):
         new_ids[idx] = self._next_landmark_id + np.arange(len(idx))
         self._next_landmark_id += len(idx)
         pos = self._stereo_points_world(feats, stereo, T_wc, idx)
+        self._record_viewing(new_ids[idx], pos, T_wc[:3, 3], feats.octave[idx])
         self._provisional[frame.index] = (new_ids[idx], pos, feats.descriptors[idx])
         self._view_dirty = True
         uids, seen_visible, seen_found = seen_counts(self._seen)
@@ -321,7 +338,7 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin, TrackerRelocalisationMixin):
         line_fields = {} if lines is None else self._keyframe_lines(frame, lines, line_matched, T_wc)
         kf = KeyframeData(
             index=frame.index, timestamp=frame.timestamp, T_world_cam=T_wc.copy(),
-            uv=feats.uv.astype(np.float32), u_right=stereo.u_right.astype(np.float32),
+            uv=feats.uv.astype(np.float32), u_right=self._keyframe_u_right(stereo),
             depth=stereo.depth.astype(np.float32), descriptors=feats.descriptors.copy(),
             octave=feats.octave.astype(np.int32), landmark_ids=matched_ids.copy(), new_landmark_ids=new_ids,
             scale_factor=self.params.scale_factor, restart=restart,
@@ -404,9 +421,11 @@ class Tracker(MapTrackingMixin, TrackerLinesMixin, TrackerRelocalisationMixin):
                 T_cw = est.T_cam_world
                 est = None
             # stage 2 (TrackLocalMap): all local-map points through the RANSAC pose, small window
-            q2, r2, in_view = self._search(T_cw, view.pos, view.words, feats, kp_words, p.search_radius_local,
-                                           scaled=True)
-            visible_ids = view.ids[in_view]
+            sub = np.flatnonzero(self._in_frustum(se3_inv(T_cw), view.ids, view.pos))
+            q2, r2, in_view = self._search(T_cw, view.pos[sub], view.words[sub], feats, kp_words,
+                                           p.search_radius_local, scaled=True)
+            q2 = sub[q2]
+            visible_ids = view.ids[sub[in_view]]
             if len(q2) + n_lines >= p.min_inliers:
                 est = self._refine(T_cw, view.pos[q2], r2, feats, stereo, line_obs=line_obs)
                 if self._n_support(est) >= p.min_inliers:

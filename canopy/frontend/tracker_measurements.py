@@ -1,0 +1,73 @@
+"""What tracking measures of each landmark (a mixin of ``canopy.frontend.tracker.Tracker``):
+far stereo points as bearing-only measurements (ORB-SLAM's ThDepth role,
+``TrackingParams.stereo_obs_max_depth_baselines``) and ORB-SLAM's isInFrustum test of the
+local-map search (viewing angle and scale range, ``TrackingParams.view_max_angle_deg``).
+Uses the tracker's ``params``, ``scale_factors`` and its ``_stereo_obs_depth``,
+``_stereo_last`` / ``_stereo_obs``, ``_lm_normal`` / ``_lm_max_dist`` state.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from canopy.frontend.stereo import StereoMatches
+
+
+class TrackerMeasurementsMixin:
+    """Bearing-only far points and the frustum test (see the module docstring)."""
+
+    def _bearing_only_far(self, stereo: StereoMatches) -> StereoMatches:
+        """The measurements pose refinement and BA see: stereo points beyond the stereo
+        measurement depth lose their right-image column (monocular, bearing only); their depth
+        still initialises landmarks."""
+        if not np.isfinite(self._stereo_obs_depth):
+            return stereo
+        far = stereo.valid & (stereo.depth >= self._stereo_obs_depth)
+        if not far.any():
+            return stereo
+        return StereoMatches(np.where(far, -1.0, stereo.u_right).astype(np.float32),
+                             np.where(far, -1.0, stereo.depth).astype(np.float32), stereo.n_candidates)
+
+    def _keyframe_u_right(self, stereo: StereoMatches) -> np.ndarray:
+        """Right-image columns for BA: -1 (monocular edge) beyond the stereo measurement depth."""
+        far = stereo.valid & (stereo.depth >= self._stereo_obs_depth)
+        return np.where(far, -1.0, stereo.u_right).astype(np.float32)
+
+    def _refine(self, T_cw, X, r, feats, stereo, inliers=None, line_obs=None):
+        # far points as monocular measurements (see _bearing_only_far)
+        obs = self._stereo_obs if stereo is self._stereo_last else stereo
+        return super()._refine(T_cw, X, r, feats, obs, inliers=inliers, line_obs=line_obs)
+
+    def _record_viewing(self, ids: np.ndarray, pos: np.ndarray, centre: np.ndarray, octave: np.ndarray) -> None:
+        """ORB-SLAM's MapPoint normal and max distance (UpdateNormalAndDepth) at creation:
+        the unit ray from the creating camera, and distance x scale^octave."""
+        if len(ids) == 0:
+            return
+        need = int(ids.max()) + 1
+        if need > len(self._lm_max_dist):
+            cap = max(need, 2 * len(self._lm_max_dist), 1024)
+            self._lm_normal = np.concatenate([self._lm_normal, np.zeros((cap - len(self._lm_normal), 3))])
+            self._lm_max_dist = np.concatenate([self._lm_max_dist, np.zeros(cap - len(self._lm_max_dist))])
+        ray = pos - centre
+        dist = np.linalg.norm(ray, axis=1)
+        self._lm_normal[ids] = ray / np.maximum(dist, 1e-9)[:, None]
+        self._lm_max_dist[ids] = dist * self.scale_factors[octave]
+
+    def _in_frustum(self, T_wc: np.ndarray, ids: np.ndarray, pos: np.ndarray) -> np.ndarray:
+        """ORB-SLAM's isInFrustum beyond the image bounds: the landmark is seen within
+        ``view_max_angle_deg`` of the direction it was created from and at a distance its
+        descriptor's scale range covers (0.8 min .. 1.2 max). Landmarks this tracker did not
+        create (a loaded map) pass."""
+        p = self.params
+        ok = np.ones(len(ids), bool)
+        if p.view_max_angle_deg >= 180 or len(ids) == 0:
+            return ok
+        known = (ids >= 0) & (ids < len(self._lm_max_dist))
+        k = np.flatnonzero(known)
+        k = k[self._lm_max_dist[ids[k]] > 0]
+        ray = pos[k] - T_wc[:3, 3]
+        dist = np.linalg.norm(ray, axis=1)
+        cos = np.einsum("ij,ij->i", ray, self._lm_normal[ids[k]]) / np.maximum(dist, 1e-9)
+        dmax = self._lm_max_dist[ids[k]]
+        dmin = dmax / self.scale_factors[-1]
+        ok[k] = (cos >= np.cos(np.radians(p.view_max_angle_deg))) & (dist >= 0.8 * dmin) & (dist <= 1.2 * dmax)
+        return ok
