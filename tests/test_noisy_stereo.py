@@ -40,7 +40,9 @@ def test_sad_acceptance_factor_falls_with_the_snr():
     assert sad_snr(3.0 * n * 5.0, p.subpixel_window, 5.0) == pytest.approx(3.0)
     off = TrackingParams()
     assert sad_acceptance_factor(1.0 * n * 5.0, 5.0, off) == off.sad_outlier_factor  # equal factors: off
-    for bad in ({"sad_outlier_factor_noisy": 3.0}, {"sad_outlier_factor_noisy": 0.0},
+    above = TrackingParams(sad_outlier_factor=1.3)  # a stricter base factor (synthetic.yaml) keeps the rule off
+    assert sad_acceptance_factor(1.0 * n * 5.0, 5.0, above) == 1.3
+    for bad in ({"sad_outlier_factor_noisy": -1.0}, {"sad_outlier_factor_noisy": 0.0},
                 {"sad_snr_low": 5.0, "sad_snr_high": 4.0}):
         with pytest.raises(ConfigError, match="sad_"):
             TrackingParams(**bad)
