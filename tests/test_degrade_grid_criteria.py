@@ -1,0 +1,48 @@
+"""Issue 9's grid criteria as the degradation benchmark scores them (benchmarks/bench_degrade_grid.py)."""
+import importlib.util
+from pathlib import Path
+
+_spec = importlib.util.spec_from_file_location(
+    "bench_degrade_grid", Path(__file__).resolve().parents[1] / "benchmarks" / "bench_degrade_grid.py")
+grid = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(grid)
+
+
+def _row(cell, method, tracked, ate):
+    return {"dataset": "kitti", "cell": cell, "method": method, "tracked_pct": tracked, "ate_rmse_m": ate}
+
+
+def test_issue9_checks_apply_both_criteria_per_cell():
+    rows = [_row("clean", "auto", 100.0, 0.05),
+            # ORB-SLAM3 tracks: auto must track all at <= 1.5x clean and not be less accurate
+            _row("lit", "auto", 100.0, 0.07), _row("lit", "orbslam3-raw", 100.0, 0.08),
+            _row("hazy", "auto", 100.0, 0.20), _row("hazy", "orbslam3-raw", 100.0, 0.05),
+            # ORB-SLAM3 lost: only "at least as good as ORB-SLAM3 raw" applies
+            _row("dark", "auto", 100.0, 0.06), _row("dark", "orbslam3-raw", 41.0, None),
+            _row("darker", "auto", 8.0, None), _row("darker", "orbslam3-raw", 24.0, None),
+            _row("no-peer", "auto", 100.0, 0.05)]
+    checks = {c["cell"]: c for c in grid.issue9_checks(rows)}
+    assert set(checks) == {"lit", "hazy", "dark", "darker"}  # a cell without ORB-SLAM3 beside it is not judged
+    assert checks["lit"]["pass"] and checks["lit"]["at_least_orb_raw"]
+    assert checks["hazy"]["pass"] is False and not checks["hazy"]["at_least_orb_raw"]  # 4x clean, worse than ORB
+    assert checks["dark"]["pass"] is None and checks["dark"]["at_least_orb_raw"]
+    assert checks["darker"]["pass"] is None and not checks["darker"]["at_least_orb_raw"]  # 8 % < 24 %
+
+
+def test_merge_keeps_the_latest_row_of_a_cell(tmp_path):
+    import json
+    old = {"datasets": ["kitti"], "gains": [1.0], "betas": [0.06], "methods": ["auto"], "noise_levels": ["high"],
+           "criteria": {"checks": []},
+           "rows": [_row("clean", "auto", 100.0, 0.05), _row("g1-b0.06-high", "auto", 100.0, 0.20),
+                    _row("g1-b0.06-high", "orbslam3-raw", 100.0, 0.05)]}
+    new = dict(old, rows=[_row("clean", "auto", 100.0, 0.04), _row("g1-b0.06-high", "auto", 100.0, 0.05)])
+    for r in old["rows"] + new["rows"]:
+        r.update(gain=1.0, beta=0.06 if r["cell"] != "clean" else 0.0, noise="high")
+    (tmp_path / "old.json").write_text(json.dumps(old))
+    (tmp_path / "new.json").write_text(json.dumps(new))
+    assert grid.merge([tmp_path / "old.json", tmp_path / "new.json"], tmp_path) == 0
+    merged = json.loads((tmp_path / "bench_degrade_grid.json").read_text())
+    autos = [r for r in merged["rows"] if r["method"] == "auto"]
+    assert sorted(r["ate_rmse_m"] for r in autos) == [0.04, 0.05]  # the new rows replaced the old ones
+    check = merged["criteria"]["checks"][0]
+    assert check["pass"] is True and check["at_least_orb_raw"] is True  # 0.05 <= 1.5 x 0.04, = ORB-SLAM3
