@@ -53,7 +53,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "default: configs/<dataset>.yaml")
     p.add_argument("--out", default=None, help="results folder; default: results/<dataset>-<time>/")
     p.add_argument("--clock", choices=("lockstep", "realtime"), default=None,
-                   help="lockstep: each frame fully processed before the next (deterministic); realtime: "
+                   help="lockstep: frames in order, none dropped, each local-map update applied before a fixed later "
+                        "frame (runtime.map_update_lag_frames; deterministic); realtime: "
                         "frames arrive at the dataset rate and late frames are dropped and counted "
                         "(default from the config: lockstep)")
     p.add_argument("--max-frames", type=int, default=None, help="process only the first N frames")
