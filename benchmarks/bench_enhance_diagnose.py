@@ -31,7 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from canopy.backend import LocalMapper  # noqa: E402
-from canopy.config import load_run_config  # noqa: E402
+from canopy.config import load_run_config, parse_value  # noqa: E402
 from canopy.degrade import disparity_sgbm  # noqa: E402
 from canopy.enhance import make_enhancer, pair_arguments, tracking_fast_arguments  # noqa: E402
 from canopy.frontend import Tracker  # noqa: E402
@@ -40,13 +40,6 @@ from canopy.frontend.stereo import match_stereo  # noqa: E402
 from canopy.metrics import ape, ate_sim3  # noqa: E402
 from canopy.sources import BUNDLED_DATA, open_source  # noqa: E402
 from shared.types import StereoFrame  # noqa: E402
-
-
-def _value(text: str):
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError:
-        return text
 
 
 def enhance_pair(enhancer, left, right):
@@ -163,8 +156,8 @@ def main() -> int:
     ap.add_argument("--per-frame", action="store_true")
     ap.add_argument("--no-stereo", action="store_true", help="skip the disparity-error scoring (faster)")
     args = ap.parse_args()
-    enh = {k: _value(v) for k, v in (s.split("=", 1) for s in args.enh)}
-    trk = {k: _value(v) for k, v in (s.split("=", 1) for s in args.set)}
+    enh = {k: parse_value(v) for k, v in (s.split("=", 1) for s in args.enh)}
+    trk = {k: parse_value(v) for k, v in (s.split("=", 1) for s in args.set)}
     clean = args.clean or BUNDLED_DATA[args.dataset]
     out, _ = run(args.path, clean, args.dataset, enh, trk, args.max_frames, args.per_frame, not args.no_stereo,
                  args.fast)

@@ -18,7 +18,6 @@ every keyframe's local BA is waited for before the next frame is read, as before
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import sys
@@ -32,24 +31,10 @@ sys.path.insert(0, str(ROOT))
 import yaml  # noqa: E402
 
 from canopy.app import run_slam  # noqa: E402
-from canopy.config import default_config_path  # noqa: E402
+from canopy.config import default_config_path, parse_variant  # noqa: E402
 from canopy.report import write_json  # noqa: E402
 
 DEFAULT_VARIANTS = ("waiting:runtime.map_update_lag_frames=0,runtime.lockstep_prefetch_frames=0",)
-
-
-def parse_variant(text: str) -> tuple[str, list[tuple[str, str, object]]]:
-    name, _, sets = text.partition(":")
-    out = []
-    for item in filter(None, sets.split(",")):
-        key, val = item.split("=", 1)
-        section, field = key.split(".", 1)
-        try:
-            value = json.loads(val)
-        except json.JSONDecodeError:
-            value = val
-        out.append((section, field, value))
-    return name, out
 
 
 def _config_file(dataset: str, sets, folder: Path, heartbeat_s: float) -> Path:

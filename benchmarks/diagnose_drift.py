@@ -23,15 +23,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from benchmarks.diagnose_tracking import _parse_value  # noqa: E402
 from canopy.backend import LocalMapper  # noqa: E402
-from canopy.config import load_run_config  # noqa: E402
+from canopy.config import load_run_config, parse_setting, with_settings  # noqa: E402
 from canopy.frontend import Tracker  # noqa: E402
 from canopy.frontend.geometry import se3_inv  # noqa: E402
 from canopy.metrics import ape  # noqa: E402
 from canopy.pipeline import frame_poses  # noqa: E402
 from canopy.sources import open_source  # noqa: E402
-from dataclasses import replace  # noqa: E402
 
 
 def rotvec(R: np.ndarray) -> np.ndarray:
@@ -52,15 +50,8 @@ def relative_rotation_errors(est: np.ndarray, gt: np.ndarray) -> np.ndarray:
 
 
 def run(dataset, path, max_frames, sets):
-    cfg = load_run_config(dataset)
+    cfg = with_settings(load_run_config(dataset), [parse_setting(s) for s in sets])
     tp, mp = cfg.tracking, cfg.mapping
-    for s in sets:
-        key, val = s.split("=", 1)
-        section, name = key.split(".", 1)
-        if section == "tracking":
-            tp = replace(tp, **{name: _parse_value(val)})
-        else:
-            mp = replace(mp, **{name: _parse_value(val)})
     src = open_source("euroc" if dataset == "synthetic" else dataset, path, max_frames=max_frames)
     calib = src.calibration
     tracker = Tracker(calib, tp)

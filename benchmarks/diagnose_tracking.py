@@ -13,9 +13,7 @@ ratio |t_est| / |t_gt| shows a depth bias: > 1 means motion over-estimated).
 from __future__ import annotations
 
 import argparse
-import json
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -23,31 +21,18 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from canopy.config import load_run_config, with_overrides  # noqa: E402
+from canopy.config import load_run_config, parse_setting, with_overrides, with_settings  # noqa: E402
 from canopy.frontend.geometry import se3_inv  # noqa: E402
 from canopy.metrics import ape  # noqa: E402
 from canopy.pipeline import run_sequential  # noqa: E402
 from canopy.sources import open_source  # noqa: E402
 
 
-def _parse_value(text: str):
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError:
-        return text
-
-
 def run(dataset: str, path=None, max_frames=None, sets=(), lines=False):
     """In-process lockstep run with the dataset's config and ``section.name=value`` overrides."""
-    cfg = with_overrides(load_run_config(dataset), lines=lines or None)
+    cfg = with_settings(with_overrides(load_run_config(dataset), lines=lines or None),
+                        [parse_setting(s) for s in sets])
     tp, mp = cfg.tracking, cfg.mapping
-    for s in sets:
-        key, val = s.split("=", 1)
-        section, name = key.split(".", 1)
-        if section == "tracking":
-            tp = replace(tp, **{name: _parse_value(val)})
-        else:
-            mp = replace(mp, **{name: _parse_value(val)})
     # generated sequences are EuRoC folders with their own config (configs/synthetic.yaml)
     src = open_source("euroc" if dataset == "synthetic" else dataset, path, max_frames=max_frames)
     res = run_sequential(src, tp, mp, map_update_lag=cfg.runtime.map_update_lag_frames)  # as the actors

@@ -21,10 +21,8 @@ lag, so the lag's speed shows only through the actors (``launch.py``, ``bench_pe
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from canopy.backend import LocalMapper  # noqa: E402
-from canopy.config import load_run_config  # noqa: E402
+from canopy.config import load_run_config, parse_variant, with_settings  # noqa: E402
 from canopy.frontend import Tracker  # noqa: E402
 from canopy.metrics import ape  # noqa: E402
 from canopy.pipeline import MapUpdateSchedule, effective_map_update_lag  # noqa: E402
@@ -44,31 +42,9 @@ STAGES = ("noise_estimate", "orb", "stereo", "match_motion", "pnp", "track_local
 MAP_STAGES = ("insert", "window", "ba", "cull", "update", "total")
 
 
-def parse_variant(text: str) -> tuple[str, list[tuple[str, str, object]]]:
-    name, _, sets = text.partition(":")
-    out = []
-    for item in filter(None, sets.split(",")):
-        key, val = item.split("=", 1)
-        section, field = key.split(".", 1)
-        try:
-            value = json.loads(val)
-        except json.JSONDecodeError:
-            value = val
-        out.append((section, field, value))
-    return name, out
-
-
 def run_once(dataset: str, frames, calib, sets) -> dict:
-    cfg = load_run_config(dataset)
+    cfg = with_settings(load_run_config(dataset), sets)
     tp, mp, rt = cfg.tracking, cfg.mapping, cfg.runtime
-    for section, field, value in sets:
-        if section == "tracking":
-            tp = replace(tp, **{field: value})
-        elif section == "runtime":
-            rt = replace(rt, **{field: value})
-        else:
-            mp = replace(mp, **{field: value})
-    rt.validate()
     tracker, mapper = Tracker(calib, tp), LocalMapper(calib, mp)
     schedule = MapUpdateSchedule(effective_map_update_lag(rt.map_update_lag_frames, tp))
     track_cpu, map_cpu, step_wall, stage, map_stage = [], [], [], [], []

@@ -137,3 +137,46 @@ def with_overrides(cfg: RunConfig, clock: str | None = None, enhance: str | None
     if callable(validate):
         validate()
     return replace(cfg, runtime=runtime, enhancement=enhancement)
+
+
+def parse_setting(text: str) -> tuple[str, str, object]:
+    """``section.field=value`` -> (section, field, value); the value as JSON when it parses
+    (numbers, booleans, lists), else the string. For benchmark variants and ``--set`` flags."""
+    key, sep, raw = text.partition("=")
+    section, dot, field = key.partition(".")
+    if not sep or not dot or not section or not field:
+        raise ConfigError(text, "expected section.field=value, e.g. tracking.n_features=2000")
+    return section, field, parse_value(raw)
+
+
+def parse_value(raw: str):
+    """A setting's value: JSON when it parses, else the string itself."""
+    import json
+    try:
+        return json.loads(raw)
+    except json.JSONDecodeError:
+        return raw
+
+
+def parse_variant(text: str) -> tuple[str, list[tuple[str, str, object]]]:
+    """``name:section.field=value,section.field=value`` -> (name, settings)."""
+    name, _, sets = text.partition(":")
+    return name, [parse_setting(item) for item in filter(None, sets.split(","))]
+
+
+def with_settings(cfg: RunConfig, settings) -> RunConfig:
+    """``cfg`` with ``(section, field, value)`` settings applied to its typed sections (each section
+    re-validated); an unknown section or field is a ConfigError naming it."""
+    for section, field, value in settings:
+        params = getattr(cfg, section, None) if section != "source_file" else None
+        if params is None or not hasattr(params, field):
+            raise ConfigError(f"{section}.{field}", "no such setting")
+        try:
+            params = replace(params, **{field: value})
+        except TypeError as exc:
+            raise ConfigError(f"{section}.{field}", str(exc)) from None
+        validate = getattr(params, "validate", None)
+        if callable(validate):
+            validate()
+        cfg = replace(cfg, **{section: params})
+    return cfg
