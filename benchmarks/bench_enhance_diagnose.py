@@ -38,6 +38,7 @@ from canopy.frontend import Tracker  # noqa: E402
 from canopy.frontend.geometry import se3_inv  # noqa: E402
 from canopy.frontend.stereo import match_stereo  # noqa: E402
 from canopy.metrics import ape, ate_sim3  # noqa: E402
+from canopy.pipeline import MapUpdateSchedule, effective_map_update_lag  # noqa: E402
 from canopy.sources import BUNDLED_DATA, open_source  # noqa: E402
 from shared.types import StereoFrame  # noqa: E402
 
@@ -93,9 +94,13 @@ def run(path, clean_path, dataset, enh_sets, track_sets, max_frames=None, per_fr
     enhancer = make_enhancer(enh)
     tracker = Tracker(src.calibration, tp)
     mapper = LocalMapper(src.calibration, cfg.mapping)
+    # map updates applied when the actors' lockstep applies them (runtime.map_update_lag_frames)
+    schedule = MapUpdateSchedule(effective_map_update_lag(cfg.runtime.map_update_lag_frames, tp, cfg.runtime.sensor))
     rows, poses, rel, refs, statuses = [], [], [], [], []
     for i in range(len(src)):
         fr = src.frame(i)
+        for update in schedule.take_due(fr.index):
+            tracker.apply_map_update(update)
         le, re, info = enhance_pair(enhancer, fr.left, fr.right)
         frame = StereoFrame(fr.index, fr.timestamp, le, re)
         kw = actor_fast(enh, info, le, tp.n_features, fast_rule)
@@ -109,7 +114,8 @@ def run(path, clean_path, dataset, enh_sets, track_sets, max_frames=None, per_fr
         row.update(status=res.status, inl=int(res.n_inliers), matches=int(res.n_matches),
                    noise=res.noise_sigma, reason=res.lost_reason)
         if res.is_keyframe and res.keyframe is not None:
-            tracker.apply_map_update(mapper.insert_keyframe(res.keyframe))
+            schedule.keyframe_sent(res.keyframe.index, fr.index)
+            schedule.hold(mapper.insert_keyframe(res.keyframe))
         poses.append(res.T_world_cam.copy())
         rel.append(None if res.T_ref_cam is None else res.T_ref_cam.copy())
         refs.append(res.reference_kf_index)
