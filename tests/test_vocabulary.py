@@ -159,7 +159,7 @@ def test_lbd_line_descriptors_use_the_same_vocabulary_class(tmp_path):
     assert len(shipped.transform(per_image[0])[0]) > 5
 
 
-def test_bad_input_gets_a_clear_error(tmp_path, small_trained):
+def test_bad_input_is_refused_with_a_message_naming_it(tmp_path, small_trained):
     with pytest.raises(InputError, match="not found"):
         Vocabulary.load(tmp_path / "missing.txt")
     small_trained.save(tmp_path / "v.txt")
