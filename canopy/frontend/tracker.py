@@ -26,7 +26,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from canopy.frontend.features import Features, OrbExtractor
-from canopy.frontend.keypoint_centres import centre_keypoints
 from canopy.frontend.keyframe_policy import entropy_ratio, keyframe_reasons
 from canopy.frontend.geometry import (differential_entropy, pose_information, se3_inv, stereo_pose_jacobian,
                                       transform)
@@ -35,12 +34,13 @@ from canopy.frontend.map_view import MapView, merge_views, seen_counts
 from canopy.frontend.matching import as_words
 from canopy.frontend.messages import KeyframeData, LocalMapUpdate, TrackingResult
 from canopy.frontend.params import TrackingParams
-from canopy.frontend.stereo import StereoMatches, match_stereo
+from canopy.frontend.stereo import StereoMatches
 from canopy.frontend.track_health import (LOST_TOO_FEW_MATCHES, LOST_TOO_FEW_STEREO, image_noise_sigma,
                                           judge_pose)
 from canopy.frontend.tracker_lines import TrackerLinesMixin
 from canopy.frontend.tracker_measurements import TrackerMeasurementsMixin
 from canopy.frontend.tracker_reloc import TrackerRelocalisationMixin
+from canopy.frontend.tracker_worker import StereoJob, TrackerFeaturesMixin, record_stage as _stage, stage_clock as _clock
 from shared.types import StereoCalibration, StereoFrame
 
 if TYPE_CHECKING:
@@ -55,18 +55,6 @@ def _ms(t0: float) -> float:
     return (time.perf_counter() - t0) * 1e3
 
 
-def _clock() -> tuple[float, float]:
-    """(wall, this thread's CPU) now: a stage's CPU time shows what it costs the critical path
-    whatever the machine's load (wall time on a shared 2-core machine mostly measures waiting)."""
-    return time.perf_counter(), time.thread_time()
-
-
-def _stage(timings: dict, name: str, t0: tuple[float, float]) -> None:
-    """Record a stage's wall ms as ``name`` and its tracking-thread CPU ms as ``name_cpu``."""
-    timings[name] = (time.perf_counter() - t0[0]) * 1e3
-    timings[name + "_cpu"] = (time.thread_time() - t0[1]) * 1e3
-
-
 def _refreshed_matches(last_matched, ids, positions):
     """(positions, words, ids) of the last frame's matches re-read from a map update (by id)."""
     pos, words, lids = last_matched
@@ -79,7 +67,7 @@ def _refreshed_matches(last_matched, ids, positions):
     return np.asarray(positions, float)[order][j[found]], words[found], lids[found]
 
 
-class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, TrackerRelocalisationMixin):
+class Tracker(TrackerFeaturesMixin, TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, TrackerRelocalisationMixin):
     def __init__(self, calib: StereoCalibration, params: TrackingParams | None = None,
                  initial_pose: np.ndarray | None = None):
         self.calib = calib
@@ -88,6 +76,9 @@ class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, Tra
         # cv2.ORB objects are not thread-safe: the right image gets its own extractor.
         self.extractor_right = OrbExtractor(self.params)
         self._pool = ThreadPoolExecutor(max_workers=1) if self.params.parallel_extraction else None
+        # the right image's ORB and the stereo matching in that worker while this thread searches the
+        # local map (canopy.frontend.tracker_worker); lines keep their own jobs in it, so not with lines
+        self._parallel_stereo = bool(self.params.parallel_stereo and self._pool is not None and not self.params.use_lines)
         self.scale_factors = self.params.scale_factor ** np.arange(self.params.n_levels)
         self.K = calib.K
         self._initial_pose = np.eye(4) if initial_pose is None else np.asarray(initial_pose, float)
@@ -215,14 +206,28 @@ class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, Tra
     def _close(self, stereo: StereoMatches) -> np.ndarray:
         return stereo.valid & (stereo.depth < self._close_depth)
 
+    def _stereo(self, stereo: StereoMatches | StereoJob, timings: dict) -> StereoMatches:
+        """The frame's stereo matches, waiting for the worker's job if they are pending (its
+        wait is the tracking thread's "stereo" stage); the first call also derives the matches
+        pose refinement sees (far points bearing only)."""
+        if isinstance(stereo, StereoJob):
+            t0 = _clock()
+            job, stereo = stereo, stereo.result()
+            if self._stereo_last is not stereo:
+                _stage(timings, "stereo", t0)
+                timings.update(job.timings)
+        if self._stereo_last is not stereo:
+            self._stereo_last, self._stereo_obs = stereo, self._bearing_only_far(stereo)
+        return stereo
+
     # ------------------------------------------------------------------ main entry
     def track(self, frame: StereoFrame, fast_threshold: int | None = None,
               fast_fallback: int | None = None, fast_min_keypoints: int = 0) -> TrackingResult:
         """Track one stereo frame. ``fast_threshold`` / ``fast_fallback`` override the
         FAST threshold (AFE Eq. 18 / Eq. 19 when too few of ``fast_min_keypoints``)."""
         timings: dict[str, float] = {}
-        t_all = _clock()
-        t0 = _clock()
+        t_all = t0 = _clock()
+        self._stereo_last = None
         noise_sigma = None
         if self.params.fast_noise_factor > 0:
             # FAST threshold floor from the image noise (track_health): corners from the signal
@@ -234,25 +239,10 @@ class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, Tra
                 if fast_fallback is not None:
                     fast_fallback = max(int(fast_fallback), min(floor, 254) // 2)
             _stage(timings, "noise_estimate", t0)
-        if self._pool is not None:
-            right_job = self._pool.submit(self.extractor_right.extract, frame.right, fast_threshold,
-                                          fast_fallback, fast_min_keypoints)
-        line_job = self._submit_line_jobs(frame) if self._lines_on else None
-        if self._pool is not None:
-            left = self.extractor.extract(frame.left, fast_threshold, fast_fallback, fast_min_keypoints)
-            right = right_job.result()
-        else:
-            left = self.extractor.extract(frame.left, fast_threshold, fast_fallback, fast_min_keypoints)
-            right = self.extractor_right.extract(frame.right, fast_threshold, fast_fallback, fast_min_keypoints)
-        _stage(timings, "orb", t0)
-        t0 = _clock()
-        stereo = match_stereo(left, right, frame.left, frame.right, self.calib, self.params, noise_sigma)
-        if self.params.centre_level_keypoints:  # OpenCV's pyramid coordinates -> pixel centres
-            left, stereo = centre_keypoints(left, stereo, self.scale_factors, self.calib.width, self.calib.height)
-        self._stereo_last, self._stereo_obs = stereo, self._bearing_only_far(stereo)
-        _stage(timings, "stereo", t0)
-        n_stereo = int(stereo.valid.sum())
-
+        left, stereo, line_job = self._left_and_stereo(frame, (fast_threshold, fast_fallback, fast_min_keypoints),
+                                                       noise_sigma, timings)
+        if not isinstance(stereo, StereoJob):
+            stereo = self._stereo(stereo, timings)
         lines = None
         if line_job is not None:
             t0 = time.perf_counter()
@@ -263,12 +253,13 @@ class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, Tra
         if self._need_restart and 0 < self._lost_streak <= self.params.relocalise_bridge_frames:
             res = self._relocalise(frame, left, stereo, timings, lines)
         elif self._db_reloc_due():  # after the bridge, or the start in a loaded map (tracker_reloc)
-            res = self._relocalise_by_query(frame, left, stereo)
+            res = self._relocalise_by_query(frame, left, self._stereo(stereo, timings))
         elif not self._initialised or self._need_restart:
-            res = self._initialise(frame, left, stereo, n_stereo, lines)
-        else:
+            stereo = self._stereo(stereo, timings)
+            res = self._initialise(frame, left, stereo, int(stereo.valid.sum()), lines)
+        else:  # with parallel_stereo the search against the local map runs before the matches are in
             res = self._track_frame(frame, left, stereo, timings, lines)
-        res.n_stereo = n_stereo
+        res.n_stereo = int(self._stereo(stereo, timings).valid.sum())
         res.noise_sigma = noise_sigma
         if self._lines_on:
             self._finish_line_jobs(res.is_keyframe)
@@ -429,6 +420,7 @@ class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, Tra
                 timings["line_match"] = _ms(t1)
             if from_prediction:
                 # refine on lines + stage-1 points first, then search the local map from there
+                stereo = self._stereo(stereo, timings)
                 est = self._refine(T_cw, X, r, feats, stereo, inliers=inliers, line_obs=line_obs)
                 T_cw = est.T_cam_world
                 est = None
@@ -438,6 +430,7 @@ class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, Tra
                                            p.search_radius_local, scaled=True)
             q2 = sub[q2]
             visible_ids = view.ids[sub[in_view]]
+            stereo = self._stereo(stereo, timings)  # the worker's matches: needed from here on
             if len(q2) + n_lines >= p.min_inliers:
                 est = self._refine(T_cw, view.pos[q2], r2, feats, stereo, line_obs=line_obs)
                 if self._n_support(est) >= p.min_inliers:
@@ -446,7 +439,8 @@ class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, Tra
                     est = None
             if est is None:
                 est = self._refine(T_cw, X, r, feats, stereo, inliers=inliers, line_obs=line_obs)
-        _stage(timings, "track_local_map", t0)
+        stereo = self._stereo(stereo, timings)
+        _stage(timings, "track_local_map", t0)  # includes the wait for the worker's stereo (its own stage)
         n_matches = len(r)
         if est is None:
             reason = LOST_TOO_FEW_MATCHES
