@@ -54,12 +54,14 @@ def band_pairs(q_lo: np.ndarray, q_hi: np.ndarray, ref_key_sorted: np.ndarray) -
     return qi, rj
 
 
-def best_two(qi: np.ndarray, rj: np.ndarray, dist: np.ndarray, n_query: int, second_ref: bool = False):
+def best_two(qi: np.ndarray, rj: np.ndarray, dist: np.ndarray, n_query: int, second_ref: bool = False,
+             tie_rank: np.ndarray | None = None):
     """Per query: best reference, its distance and the second-best distance.
 
     Returns (best_ref (n_query,) int64 with -1 where none, best_dist, second_dist) where
     missing distances are a large sentinel (1 << 20); with ``second_ref`` also the second-best
-    reference (-1 where none) as a fourth array.
+    reference (-1 where none) as a fourth array. Equal distances go to the earlier pair, or with
+    ``tie_rank`` (one distinct rank per reference) to the reference of lower rank.
     """
     big = 1 << 20
     best_ref = np.full(n_query, -1, np.int64)
@@ -68,6 +70,10 @@ def best_two(qi: np.ndarray, rj: np.ndarray, dist: np.ndarray, n_query: int, sec
     second_r = np.full(n_query, -1, np.int64)
     if len(qi) == 0:
         return (best_ref, best_d, second_d, second_r) if second_ref else (best_ref, best_d, second_d)
+    if tie_rank is not None:
+        if not (len(qi) < 2 or bool(np.all(qi[1:] >= qi[:-1]))):
+            raise ValueError("best_two: tie_rank needs pairs grouped by query")
+        return _best_two_grouped(qi, rj, dist, best_ref, best_d, second_d, second_r, second_ref, tie_rank)
     if len(qi) > 1 and bool(np.all(qi[1:] >= qi[:-1])):
         return _best_two_grouped(qi, rj, dist, best_ref, best_d, second_d, second_r, second_ref)
     # one int64 key sorts by query, then by distance (distances are < 2**16)
@@ -88,25 +94,36 @@ def best_two(qi: np.ndarray, rj: np.ndarray, dist: np.ndarray, n_query: int, sec
     return best_ref, best_d, second_d
 
 
-def _best_two_grouped(qi, rj, dist, best_ref, best_d, second_d, second_r, want_second_ref):
+def _best_two_grouped(qi, rj, dist, best_ref, best_d, second_d, second_r, want_second_ref, tie_rank=None):
     """``best_two`` when the pairs come grouped by query (``qi`` non-decreasing, as
     ``band_pairs`` makes them): segment minima instead of a sort, O(n). Ties go to the earlier
-    pair, as the stable sort does."""
+    pair, as the stable sort does, or to the lower ``tie_rank`` of the reference."""
     n = len(qi)
     starts = np.flatnonzero(np.r_[True, qi[1:] != qi[:-1]])
     q = qi[starts]
     pos = np.arange(n, dtype=np.int64)
-    key = dist.astype(np.int64) * n + pos           # distance first, then position
+    if tie_rank is None:
+        m, tie = n, pos
+    else:
+        m, tie = len(tie_rank), np.asarray(tie_rank, np.int64)[rj]
+    key = dist.astype(np.int64) * m + tie           # distance first, then position (or rank)
     best_key = np.minimum.reduceat(key, starts)
-    best_pos = best_key % n
+    if tie_rank is None:
+        best_pos = best_key % n
+    else:  # the pair of each segment holding its minimum key (keys are distinct within a segment)
+        best_pos = np.flatnonzero(key == np.repeat(best_key, np.diff(np.r_[starts, n])))
     best_ref[q] = rj[best_pos]
-    best_d[q] = best_key // n
+    best_d[q] = best_key // m
     key[best_pos] = np.iinfo(np.int64).max          # the runner-up: minimum of the rest
     sec_key = np.minimum.reduceat(key, starts)
     has = sec_key != np.iinfo(np.int64).max
-    second_d[q[has]] = sec_key[has] // n
+    second_d[q[has]] = sec_key[has] // m
     if want_second_ref:
-        second_r[q[has]] = rj[sec_key[has] % n]
+        if tie_rank is None:
+            second_r[q[has]] = rj[sec_key[has] % n]
+        else:
+            sec_pos = np.flatnonzero(key == np.repeat(sec_key, np.diff(np.r_[starts, n])))
+            second_r[qi[sec_pos]] = rj[sec_pos]
         return best_ref, best_d, second_d, second_r
     return best_ref, best_d, second_d
 
