@@ -19,6 +19,7 @@ Where things are:
 """
 from __future__ import annotations
 
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from typing import TYPE_CHECKING
@@ -153,6 +154,10 @@ class Tracker(TrackerFeaturesMixin, TrackerMeasurementsMixin, MapTrackingMixin, 
             self._next_line_id = 0
             self._ref_line_ids = np.zeros(0, np.int64)
             self._line_max_depth = p.line_max_depth_baselines * calib.baseline
+
+    def worker_thread_id(self) -> int | None:
+        """The worker thread's OS id (for per-thread CPU statistics), None without a worker."""
+        return None if self._pool is None else self._pool.submit(threading.get_native_id).result()
 
     # ------------------------------------------------------------------ map view
     def apply_map_update(self, update: LocalMapUpdate) -> None:
