@@ -4,6 +4,7 @@ the serial / straightforward computations give, on real KITTI frames."""
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -175,3 +176,21 @@ def test_batched_sad_equals_the_keypoint_by_keypoint_search(kitti_features):
     assert got[2].sum() > 50 and len(np.unique(left.octave[li])) >= 4
     assert np.array_equal(got[2], ref[2]) and np.array_equal(got[1], ref[1])
     assert np.allclose(got[0], ref[0], rtol=0, atol=1e-9)
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="Linux /proc scheduler statistics")
+def test_thread_schedstat_counts_this_threads_cpu():
+    import threading
+    import time
+
+    from actors.schedstat import thread_report, thread_schedstat
+    me = threading.get_native_id()
+    start = thread_schedstat()
+    t0 = time.thread_time()
+    x = 0
+    while time.thread_time() - t0 < 0.2:  # 0.2 s of CPU on this thread
+        x += 1
+    rep = thread_report(start, thread_schedstat(), {me: "main"}, n_frames=4)
+    assert 0.18 <= rep["main"]["cpu_s"] <= 0.5
+    assert rep["main"]["cpu_ms_per_frame"] == pytest.approx(rep["main"]["cpu_s"] * 1e3 / 4, rel=1e-3)
+    assert rep["main"]["runqueue_wait_s"] >= 0
