@@ -8,7 +8,10 @@ against the local-map view, EPnP RANSAC + motion-only refinement, entropy-ratio 
 Where things are:
 * the landmark store tracking reads: ``Tracker._map_view()`` -> ``canopy.frontend.map_view.MapView``
   (last ``LocalMapUpdate`` in ``_update_view`` + provisional landmarks of unacknowledged
-  keyframes in ``_provisional``);
+  keyframes in ``_provisional``); ``apply_map_update``: ``canopy.frontend.tracker_map_view``;
+* ORB on both images and stereo matching, the right image on a worker thread while this one
+  searches the local map (``parallel_stereo``): ``canopy.frontend.tracker_worker``; the
+  frame's stereo matches are taken with ``Tracker._stereo`` (waits for the worker if needed);
 * pose solving (projection search, EPnP RANSAC, motion-only refinement):
   ``canopy.frontend.map_tracking.MapTrackingMixin``;
 * the keyframe policy (AGRI Eq. 6-7 and ORB-SLAM's conditions): ``canopy.frontend.keyframe_policy``;
@@ -31,9 +34,10 @@ from canopy.frontend.keyframe_policy import entropy_ratio, keyframe_reasons
 from canopy.frontend.geometry import (differential_entropy, pose_information, se3_inv, stereo_pose_jacobian,
                                       transform)
 from canopy.frontend.map_tracking import MapTrackingMixin
-from canopy.frontend.map_view import MapView, merge_views, seen_counts
+from canopy.frontend.map_view import MapView, seen_counts
+from canopy.frontend.tracker_map_view import TrackerMapViewMixin
 from canopy.frontend.matching import as_words
-from canopy.frontend.messages import KeyframeData, LocalMapUpdate, TrackingResult
+from canopy.frontend.messages import KeyframeData, TrackingResult
 from canopy.frontend.params import TrackingParams
 from canopy.frontend.stereo import StereoMatches
 from canopy.frontend.track_health import (LOST_TOO_FEW_MATCHES, LOST_TOO_FEW_STEREO, image_noise_sigma,
@@ -56,19 +60,7 @@ def _ms(t0: float) -> float:
     return (time.perf_counter() - t0) * 1e3
 
 
-def _refreshed_matches(last_matched, ids, positions):
-    """(positions, words, ids) of the last frame's matches re-read from a map update (by id)."""
-    pos, words, lids = last_matched
-    ids = np.asarray(ids, np.int64)
-    if not len(lids) or not len(ids):
-        return pos[:0], words[:0], lids[:0]
-    order = np.argsort(ids)
-    j = np.clip(np.searchsorted(ids[order], lids), 0, len(ids) - 1)
-    found = ids[order][j] == lids
-    return np.asarray(positions, float)[order][j[found]], words[found], lids[found]
-
-
-class Tracker(TrackerFeaturesMixin, TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, TrackerRelocalisationMixin):
+class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, TrackerRelocalisationMixin):
     def __init__(self, calib: StereoCalibration, params: TrackingParams | None = None,
                  initial_pose: np.ndarray | None = None):
         self.calib = calib
@@ -160,41 +152,6 @@ class Tracker(TrackerFeaturesMixin, TrackerMeasurementsMixin, MapTrackingMixin, 
         return None if self._pool is None else self._pool.submit(threading.get_native_id).result()
 
     # ------------------------------------------------------------------ map view
-    def apply_map_update(self, update: LocalMapUpdate) -> None:
-        """Replace the local-map view and apply corrected keyframe poses."""
-        if update.keyframe_index < self._segment_start_kf:
-            return  # stale update from a map segment before a restart
-        self._remember_update(update)  # relocalisation by database query (tracker_reloc)
-        self._update_view.set(update.landmark_ids, update.positions, update.descriptors)
-        for k in [k for k in self._provisional if k <= update.keyframe_index]:
-            del self._provisional[k]
-        self._view_dirty = True
-        if self._lines_on:
-            self._line_update_view.set(update.line_ids, update.line_endpoints, update.line_descriptors)
-            for k in [k for k in self._line_provisional if k <= update.keyframe_index]:
-                del self._line_provisional[k]
-            self._line_view_dirty = True
-        if self._ref_kf in update.keyframe_poses:
-            T_new = np.asarray(update.keyframe_poses[self._ref_kf], float)
-            C = T_new @ se3_inv(self._T_ref)  # world correction of the reference keyframe
-            self._T_ref = T_new
-            self._T_last = C @ self._T_last
-            if self._last_points_w is not None:
-                self._last_points_w = transform(C, self._last_points_w)
-        epoch = int(getattr(update, "loop_epoch", 0))
-        if epoch > self._loop_epoch_seen:
-            # a loop correction moved the map: the last frame's matched landmarks take their corrected
-            # positions (projected uncorrected with the corrected prediction they missed by the whole
-            # correction: 62 matches and a 0.37 m frame on the day-loop); those no longer in the map go
-            self._loop_epoch_seen = epoch
-            self._last_matched = _refreshed_matches(self._last_matched, update.landmark_ids, update.positions)
-
-    def _map_view(self) -> MapView:
-        if self._view_dirty:
-            merge_views(self._update_view, self._provisional, self._view)
-            self._view_dirty = False
-        return self._view
-
     # ------------------------------------------------------------------ helpers
     def _sigma(self, octave: np.ndarray) -> np.ndarray:
         return self.params.pixel_sigma * self.scale_factors[octave]
