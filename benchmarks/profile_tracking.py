@@ -40,7 +40,8 @@ from canopy.pipeline import MapUpdateSchedule, effective_map_update_lag  # noqa:
 from canopy.report import write_json  # noqa: E402
 from canopy.sources import open_source  # noqa: E402
 
-STAGES = ("noise_estimate", "orb", "stereo", "match_motion", "pnp", "track_local_map", "keyframe", "total")
+STAGES = ("noise_estimate", "orb", "stereo", "match_motion", "pnp", "track_local_map", "keyframe", "total",
+          "stereo_worker")  # the last: right ORB excluded, the worker thread's stereo matching (parallel_stereo)
 MAP_STAGES = ("insert", "window", "ba", "cull", "update", "total")
 
 
