@@ -216,6 +216,8 @@ def actor_main(spec: ActorSpec) -> None:
     current_index = -1
     try:
         ctx = ActorContext(spec, zctx)
+        if int(spec.config.get("niceness", 0)) > 0:  # a lower CPU priority (runtime.feeder_niceness)
+            os.nice(int(spec.config["niceness"]))
         actor = _load_factory(spec.factory)(spec.config, seed=spec.seed)
         actor.name = spec.name
         actor.setup(ctx)

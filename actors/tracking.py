@@ -11,12 +11,14 @@ keyframe carry over to the frame.
 """
 from __future__ import annotations
 
+import threading
 import time
 
 import numpy as np
 
 from actors.backlog import FrameBacklog, max_frame_age
 from actors.runtime import Actor, ActorContext
+from actors.schedstat import thread_report, thread_schedstat
 from canopy.enhance import tracking_fast_arguments
 from canopy.frontend import Tracker
 from canopy.pipeline import MapUpdateSchedule, effective_map_update_lag
@@ -55,6 +57,11 @@ class TrackingActor(Actor):
         self.n_features = int(getattr(c["params"], "n_features", 0))
         self.counts = {"ok": 0, "lost": 0, "init": 0, "predicted": 0, "keyframes": 0}
         self.loop_epoch = 0  # loop corrections received from local mapping
+        # per-stage tracking-thread CPU ms of every frame (<stage>_cpu timings) for stats.json, and
+        # the threads' scheduler statistics from the first frame on (start-up excluded)
+        self.stage_cpu: dict[str, list[float]] = {}
+        self.sched_start: dict[int, tuple[int, int]] | None = None
+        self.n_tracked = 0
 
     def _attach_place_memory(self, c: dict) -> None:
         """Relocalisation by database query (canopy.loop.relocalise): in a map loaded with
@@ -118,12 +125,18 @@ class TrackingActor(Actor):
         # AFE Eq. 18, and Eq. 19 when too few corners result; only on frames the enhancement changed
         # (auto's "none" frames keep the fixed threshold, so auto costs nothing on clean data)
         # (rule: canopy.enhance.fast.tracking_fast_arguments; denoised dark frames fill the feature budget)
+        if self.sched_start is None:
+            self.sched_start = thread_schedstat()
         if self.adaptive_fast:
             res = self.tracker.track(frame, **tracking_fast_arguments(
                 frame.left, (handle.info or {}).get("method", "none"), self.enhancement, self.n_features))
         else:
             res = self.tracker.track(frame)
         self.counts[res.status] = self.counts.get(res.status, 0) + 1
+        self.n_tracked += 1
+        for key, ms in res.timings.items():
+            if key.endswith("_cpu"):
+                self.stage_cpu.setdefault(key[:-4], []).append(float(ms))
         if res.lost_reason:
             self.counts[f"lost_reason_{res.lost_reason}"] = self.counts.get(f"lost_reason_{res.lost_reason}", 0) + 1
         # a monocular initialisation hands over two keyframes (reference and current)
@@ -175,3 +188,12 @@ class TrackingActor(Actor):
 
     def teardown(self, ctx: ActorContext) -> None:
         self.ring.close()
+        # stats.json: where tracking's time went (CPU of each stage on the tracking thread, p50) and
+        # whether its threads waited for a core (run-queue wait, actors/schedstat.py)
+        ctx.extra["stage_ms_p50"] = {k: round(float(np.percentile(v, 50)), 3) for k, v in self.stage_cpu.items()}
+        if self.sched_start is not None:
+            names = {threading.get_native_id(): "tracking"}
+            worker = getattr(self.tracker, "worker_thread_id", lambda: None)()
+            if worker is not None:
+                names[worker] = "tracking_worker"
+            ctx.extra["threads"] = thread_report(self.sched_start, thread_schedstat(), names, self.n_tracked)

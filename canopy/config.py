@@ -42,6 +42,10 @@ class RuntimeParams:
     # lockstep: frames the source may read (and enhancement process) ahead of tracking
     lockstep_prefetch_frames: int = 2
     map_snapshot_period_s: float = 0.5
+    # niceness of the source and enhancement actors (cheap feeders that read ahead in lockstep): on
+    # two cores a feeder waking up should not take the core from tracking or local mapping; local
+    # mapping stays at 0 (docs/notes/s6-speed.md), loop closing has its own (loop.niceness)
+    feeder_niceness: int = 5
     seed: int = 0
     sensor: str = "stereo"           # stereo | mono (the left image only; canopy.mono)
 
@@ -69,6 +73,8 @@ class RuntimeParams:
             raise ConfigError("runtime.heartbeat_timeout_s",
                               f"must be at least {MIN_HEARTBEAT_TIMEOUT_S:g} s (actors send a heartbeat every "
                               f"second), got {self.heartbeat_timeout_s}")
+        if not 0 <= self.feeder_niceness <= 19:
+            raise ConfigError("runtime.feeder_niceness", f"must be 0..19, got {self.feeder_niceness}")
         if not 0 <= self.grace_s < float("inf"):
             raise ConfigError("runtime.grace_s", f"must be a finite number >= 0, got {self.grace_s}")
 

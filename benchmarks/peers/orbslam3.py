@@ -241,6 +241,8 @@ def _child(result_path: str, log_path: str, sequence, dataset: str, preprocess, 
     track_ms = np.full(n, np.nan)
     ok_stamps, ok_poses = [], []
     period = 1.0 / source.rate_hz if source.rate_hz > 0 else 0.0
+    from actors.schedstat import thread_report, thread_schedstat
+    sched0 = thread_schedstat()  # the calling thread runs ORB-SLAM3's tracking (in a fork: tid = pid)
     wall0 = time.perf_counter()
     for i in range(n):
         left, right = source.raw_pair(i) if raw else (lambda f: (f.left, f.right))(source.frame(i))
@@ -257,13 +259,14 @@ def _child(result_path: str, log_path: str, sequence, dataset: str, preprocess, 
         if pace and dt < period:  # upstream examples feed at the sequence rate
             time.sleep(period - dt)
     wall = time.perf_counter() - wall0
+    threads = thread_report(sched0, thread_schedstat(), {os.getpid(): "tracking"}, n)
     slam.shutdown()
     deadline = time.monotonic() + SHUTDOWN_WAIT_S
     while not slam.is_shutdown() and time.monotonic() < deadline:
         time.sleep(0.05)
     cpu = os.times()
     result = {"stamps": ok_stamps, "poses": ok_poses, "track_ms": track_ms, "total": n, "wall_s": wall,
-              "cpu_s": cpu.user + cpu.system, "final": None, "settings": text}
+              "cpu_s": cpu.user + cpu.system, "final": None, "settings": text, "threads": threads}
     # Written before SaveTrajectoryTUM, which can crash (SIGSEGV seen after ORB-SLAM3 started a
     # second map on dusk-loop): the online trajectory survives, only the final one is lost.
     with open(result_path, "wb") as f:
@@ -338,6 +341,7 @@ def run_stereo(sequence: str | Path | None, dataset: str, *, preprocess: Preproc
                       meta={"frame": "rectified left camera", "system": "orbslam3"})
     final = Trajectory(*r["final"], meta={"system": "orbslam3", "kind": "final"}) if r["final"] else None
     meta["settings"] = r["settings"]
+    meta["threads"] = r.get("threads") or {}  # per-thread CPU / run-queue wait (actors.schedstat)
     meta["final_trajectory_error"] = final_note
     return PeerResult(traj, len(traj), r["total"], np.asarray(r["track_ms"]), resets, version(), tail,
                       loops=log.count(LOOP_PATTERN), final_trajectory=final, wall_s=r["wall_s"],

@@ -25,6 +25,11 @@ class TrackingParams:
     # Extract the right image's ORB in a worker thread while the left one runs here:
     # OpenCV releases the GIL, so on 2 cores the two images cost about one.
     parallel_extraction: bool = True
+    # With parallel_extraction: the worker also matches stereo (right ORB, then the band search and
+    # SAD refinement against the left features) while this thread searches the local map with the
+    # left features; identical results (canopy.frontend.tracker_worker). Not with lines (their jobs
+    # share the worker).
+    parallel_stereo: bool = True
     grid_cols: int = 16
     grid_rows: int = 8
     oversample: float = 1.6

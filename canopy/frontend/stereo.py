@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 
 from canopy.frontend.features import Features
-from canopy.frontend.matching import as_words, band_pairs, best_two, hamming_pairs, unique_by_reference
+from canopy.frontend.matching import as_words, best_two, hamming_pairs, unique_by_reference
 from canopy.frontend.noisy_features import accept_sad
 from canopy.frontend.params import TrackingParams
 from shared.types import StereoCalibration
@@ -66,6 +66,9 @@ def subpixel_refine(left_img: np.ndarray, right_img: np.ndarray, uvl: np.ndarray
     pyr_r = image_pyramid(right_img, scale_factors, levels)
     dw = np.arange(-w, w + 1)
     strip = np.arange(-L - w, L + w + 1)
+    # |differences| are <= 510: a patch's SAD fits 16 bits unsigned up to 128 pixels (11x11), and
+    # 16-bit sums run ~1.6x faster than 32-bit ones; larger windows sum in 32 bits
+    sum_type = np.uint16 if (2 * w + 1) ** 2 * 510 < 1 << 16 else np.int32
     for lvl in levels:
         sel = np.flatnonzero(octave == lvl)
         s = scale_factors[lvl]
@@ -86,11 +89,13 @@ def subpixel_refine(left_img: np.ndarray, right_img: np.ndarray, uvl: np.ndarray
         patch_l -= patch_l[:, w:w + 1, w:w + 1]
         band = ir[rows, (xr0[:, None] + strip[None, :])[:, None, :]].astype(np.int16)  # (K,P,2L+2w+1)
         sad = np.empty((len(sel), 2 * L + 1), np.float64)
+        diff = np.empty(patch_l.shape, np.int16)  # one buffer for every shift (no temporaries)
         for shift in range(2 * L + 1):
             # window at this shift minus its centre pixel, minus the centred left patch
-            diff = band[:, :, shift:shift + 2 * w + 1] - band[:, w:w + 1, shift + w:shift + w + 1] - patch_l
+            np.subtract(band[:, :, shift:shift + 2 * w + 1], patch_l, out=diff)
+            diff -= band[:, w:w + 1, shift + w:shift + w + 1]
             np.abs(diff, out=diff)
-            sad[:, shift] = diff.reshape(len(sel), -1).sum(axis=1, dtype=np.int32)
+            sad[:, shift] = diff.reshape(len(sel), -1).view(sum_type).sum(axis=1, dtype=sum_type)
         best = np.argmin(sad, axis=1)
         interior = (best > 0) & (best < 2 * L)
         idx = np.arange(len(sel))
@@ -106,6 +111,36 @@ def subpixel_refine(left_img: np.ndarray, right_img: np.ndarray, uvl: np.ndarray
     return u_out, sad_out, ok_out
 
 
+def stereo_candidates(left: Features, right: Features, tol: np.ndarray, octave_tolerance: int):
+    """(left, right) keypoint pairs on the same row band (|v_r - v_l| <= tol per left keypoint)
+    whose pyramid levels differ by at most ``octave_tolerance``, grouped by left keypoint; and each
+    right keypoint's rank in row order (for ties). The right keypoints are searched level by level
+    (one row-sorted array per level), so pairs on incompatible levels are never formed: about
+    2.5x fewer pairs than one row band over all levels filtered afterwards (KITTI)."""
+    order = np.argsort(right.uv[:, 1], kind="stable")
+    row_rank = np.empty(len(right), np.int64)
+    row_rank[order] = np.arange(len(right))
+    by_level = order[np.argsort(right.octave[order], kind="stable")]   # by level, then row
+    levels, first = np.unique(right.octave[by_level], return_index=True)
+    ends = np.r_[first[1:], len(by_level)]
+    v_sorted = right.uv[by_level, 1]
+    lo_v, hi_v = left.uv[:, 1] - tol, left.uv[:, 1] + tol
+    # per left keypoint, one range of by_level per right level (empty where the levels are too far)
+    lo = np.zeros((len(left), len(levels)), np.int64)
+    hi = np.zeros((len(left), len(levels)), np.int64)
+    for g, (lvl, a, b) in enumerate(zip(levels, first, ends)):
+        near = np.flatnonzero(np.abs(left.octave - lvl) <= octave_tolerance)
+        lo[near, g] = a + np.searchsorted(v_sorted[a:b], lo_v[near], side="left")
+        hi[near, g] = a + np.searchsorted(v_sorted[a:b], hi_v[near], side="right")
+    counts = np.maximum(hi - lo, 0).reshape(-1)
+    total = int(counts.sum())
+    if total == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), row_rank
+    needle = np.repeat(np.arange(len(counts)), counts)
+    pos = np.repeat(lo.reshape(-1) - np.cumsum(counts) + counts, counts) + np.arange(total)
+    return needle // len(levels), by_level[pos], row_rank
+
+
 def match_stereo(left: Features, right: Features, left_img: np.ndarray, right_img: np.ndarray,
                  calib: StereoCalibration, params: TrackingParams,
                  noise_sigma: float | None = None) -> StereoMatches:
@@ -119,16 +154,14 @@ def match_stereo(left: Features, right: Features, left_img: np.ndarray, right_im
     scale_factors = params.scale_factor ** np.arange(params.n_levels)
     max_disp = params.max_disparity_fraction * calib.width
 
-    order = np.argsort(right.uv[:, 1], kind="stable")
     tol = params.row_tolerance * scale_factors[left.octave]
-    qi, rpos = band_pairs(left.uv[:, 1] - tol, left.uv[:, 1] + tol, right.uv[order, 1])
-    rj = order[rpos]
+    qi, rj, row_rank = stereo_candidates(left, right, tol, params.octave_tolerance)
     disp = left.uv[qi, 0] - right.uv[rj, 0]
-    ok = ((disp >= params.min_disparity) & (disp <= max_disp)
-          & (np.abs(left.octave[qi] - right.octave[rj]) <= params.octave_tolerance))
+    ok = (disp >= params.min_disparity) & (disp <= max_disp)
     qi, rj = qi[ok], rj[ok]
     dist = hamming_pairs(as_words(left.descriptors), as_words(right.descriptors), qi, rj)
-    best_ref, best_d, second_d = best_two(qi, rj, dist, n)
+    # equal distances go to the right keypoint higher in the image (the order of a plain row search)
+    best_ref, best_d, second_d = best_two(qi, rj, dist, n, tie_rank=row_rank)
     good = (best_ref >= 0) & (best_d <= params.stereo_max_hamming) & (best_d < params.stereo_ratio * second_d)
     li = np.flatnonzero(good)
     ri = best_ref[li]

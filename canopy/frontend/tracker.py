@@ -8,7 +8,10 @@ against the local-map view, EPnP RANSAC + motion-only refinement, entropy-ratio 
 Where things are:
 * the landmark store tracking reads: ``Tracker._map_view()`` -> ``canopy.frontend.map_view.MapView``
   (last ``LocalMapUpdate`` in ``_update_view`` + provisional landmarks of unacknowledged
-  keyframes in ``_provisional``);
+  keyframes in ``_provisional``); ``apply_map_update``: ``canopy.frontend.tracker_map_view``;
+* ORB on both images and stereo matching, the right image on a worker thread while this one
+  searches the local map (``parallel_stereo``): ``canopy.frontend.tracker_worker``; the
+  frame's stereo matches are taken with ``Tracker._stereo`` (waits for the worker if needed);
 * pose solving (projection search, EPnP RANSAC, motion-only refinement):
   ``canopy.frontend.map_tracking.MapTrackingMixin``;
 * the keyframe policy (AGRI Eq. 6-7 and ORB-SLAM's conditions): ``canopy.frontend.keyframe_policy``;
@@ -19,6 +22,7 @@ Where things are:
 """
 from __future__ import annotations
 
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from typing import TYPE_CHECKING
@@ -26,21 +30,22 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from canopy.frontend.features import Features, OrbExtractor
-from canopy.frontend.keypoint_centres import centre_keypoints
 from canopy.frontend.keyframe_policy import entropy_ratio, keyframe_reasons
 from canopy.frontend.geometry import (differential_entropy, pose_information, se3_inv, stereo_pose_jacobian,
                                       transform)
 from canopy.frontend.map_tracking import MapTrackingMixin
-from canopy.frontend.map_view import MapView, merge_views, seen_counts
+from canopy.frontend.map_view import MapView, seen_counts
+from canopy.frontend.tracker_map_view import TrackerMapViewMixin
 from canopy.frontend.matching import as_words
-from canopy.frontend.messages import KeyframeData, LocalMapUpdate, TrackingResult
+from canopy.frontend.messages import KeyframeData, TrackingResult
 from canopy.frontend.params import TrackingParams
-from canopy.frontend.stereo import StereoMatches, match_stereo
+from canopy.frontend.stereo import StereoMatches
 from canopy.frontend.track_health import (LOST_TOO_FEW_MATCHES, LOST_TOO_FEW_STEREO, image_noise_sigma,
                                           judge_pose)
 from canopy.frontend.tracker_lines import TrackerLinesMixin
 from canopy.frontend.tracker_measurements import TrackerMeasurementsMixin
 from canopy.frontend.tracker_reloc import TrackerRelocalisationMixin
+from canopy.frontend.tracker_worker import StereoJob, TrackerFeaturesMixin, record_stage as _stage, stage_clock as _clock
 from shared.types import StereoCalibration, StereoFrame
 
 if TYPE_CHECKING:
@@ -55,19 +60,7 @@ def _ms(t0: float) -> float:
     return (time.perf_counter() - t0) * 1e3
 
 
-def _refreshed_matches(last_matched, ids, positions):
-    """(positions, words, ids) of the last frame's matches re-read from a map update (by id)."""
-    pos, words, lids = last_matched
-    ids = np.asarray(ids, np.int64)
-    if not len(lids) or not len(ids):
-        return pos[:0], words[:0], lids[:0]
-    order = np.argsort(ids)
-    j = np.clip(np.searchsorted(ids[order], lids), 0, len(ids) - 1)
-    found = ids[order][j] == lids
-    return np.asarray(positions, float)[order][j[found]], words[found], lids[found]
-
-
-class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, TrackerRelocalisationMixin):
+class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, TrackerRelocalisationMixin):
     def __init__(self, calib: StereoCalibration, params: TrackingParams | None = None,
                  initial_pose: np.ndarray | None = None):
         self.calib = calib
@@ -76,6 +69,9 @@ class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, Tra
         # cv2.ORB objects are not thread-safe: the right image gets its own extractor.
         self.extractor_right = OrbExtractor(self.params)
         self._pool = ThreadPoolExecutor(max_workers=1) if self.params.parallel_extraction else None
+        # the right image's ORB and the stereo matching in that worker while this thread searches the
+        # local map (canopy.frontend.tracker_worker); lines keep their own jobs in it, so not with lines
+        self._parallel_stereo = bool(self.params.parallel_stereo and self._pool is not None and not self.params.use_lines)
         self.scale_factors = self.params.scale_factor ** np.arange(self.params.n_levels)
         self.K = calib.K
         self._initial_pose = np.eye(4) if initial_pose is None else np.asarray(initial_pose, float)
@@ -151,42 +147,11 @@ class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, Tra
             self._ref_line_ids = np.zeros(0, np.int64)
             self._line_max_depth = p.line_max_depth_baselines * calib.baseline
 
+    def worker_thread_id(self) -> int | None:
+        """The worker thread's OS id (for per-thread CPU statistics), None without a worker."""
+        return None if self._pool is None else self._pool.submit(threading.get_native_id).result()
+
     # ------------------------------------------------------------------ map view
-    def apply_map_update(self, update: LocalMapUpdate) -> None:
-        """Replace the local-map view and apply corrected keyframe poses."""
-        if update.keyframe_index < self._segment_start_kf:
-            return  # stale update from a map segment before a restart
-        self._remember_update(update)  # relocalisation by database query (tracker_reloc)
-        self._update_view.set(update.landmark_ids, update.positions, update.descriptors)
-        for k in [k for k in self._provisional if k <= update.keyframe_index]:
-            del self._provisional[k]
-        self._view_dirty = True
-        if self._lines_on:
-            self._line_update_view.set(update.line_ids, update.line_endpoints, update.line_descriptors)
-            for k in [k for k in self._line_provisional if k <= update.keyframe_index]:
-                del self._line_provisional[k]
-            self._line_view_dirty = True
-        if self._ref_kf in update.keyframe_poses:
-            T_new = np.asarray(update.keyframe_poses[self._ref_kf], float)
-            C = T_new @ se3_inv(self._T_ref)  # world correction of the reference keyframe
-            self._T_ref = T_new
-            self._T_last = C @ self._T_last
-            if self._last_points_w is not None:
-                self._last_points_w = transform(C, self._last_points_w)
-        epoch = int(getattr(update, "loop_epoch", 0))
-        if epoch > self._loop_epoch_seen:
-            # a loop correction moved the map: the last frame's matched landmarks take their corrected
-            # positions (projected uncorrected with the corrected prediction they missed by the whole
-            # correction: 62 matches and a 0.37 m frame on the day-loop); those no longer in the map go
-            self._loop_epoch_seen = epoch
-            self._last_matched = _refreshed_matches(self._last_matched, update.landmark_ids, update.positions)
-
-    def _map_view(self) -> MapView:
-        if self._view_dirty:
-            merge_views(self._update_view, self._provisional, self._view)
-            self._view_dirty = False
-        return self._view
-
     # ------------------------------------------------------------------ helpers
     def _sigma(self, octave: np.ndarray) -> np.ndarray:
         return self.params.pixel_sigma * self.scale_factors[octave]
@@ -203,14 +168,28 @@ class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, Tra
     def _close(self, stereo: StereoMatches) -> np.ndarray:
         return stereo.valid & (stereo.depth < self._close_depth)
 
+    def _stereo(self, stereo: StereoMatches | StereoJob, timings: dict) -> StereoMatches:
+        """The frame's stereo matches, waiting for the worker's job if they are pending (its
+        wait is the tracking thread's "stereo" stage); the first call also derives the matches
+        pose refinement sees (far points bearing only)."""
+        if isinstance(stereo, StereoJob):
+            t0 = _clock()
+            job, stereo = stereo, stereo.result()
+            if self._stereo_last is not stereo:
+                _stage(timings, "stereo", t0)
+                timings.update(job.timings)
+        if self._stereo_last is not stereo:
+            self._stereo_last, self._stereo_obs = stereo, self._bearing_only_far(stereo)
+        return stereo
+
     # ------------------------------------------------------------------ main entry
     def track(self, frame: StereoFrame, fast_threshold: int | None = None,
               fast_fallback: int | None = None, fast_min_keypoints: int = 0) -> TrackingResult:
         """Track one stereo frame. ``fast_threshold`` / ``fast_fallback`` override the
         FAST threshold (AFE Eq. 18 / Eq. 19 when too few of ``fast_min_keypoints``)."""
         timings: dict[str, float] = {}
-        t_all = time.perf_counter()
-        t0 = time.perf_counter()
+        t_all = t0 = _clock()
+        self._stereo_last = None
         noise_sigma = None
         if self.params.fast_noise_factor > 0:
             # FAST threshold floor from the image noise (track_health): corners from the signal
@@ -221,26 +200,11 @@ class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, Tra
                 fast_threshold = min(floor, 254)
                 if fast_fallback is not None:
                     fast_fallback = max(int(fast_fallback), min(floor, 254) // 2)
-            timings["noise_estimate"] = _ms(t0)
-        if self._pool is not None:
-            right_job = self._pool.submit(self.extractor_right.extract, frame.right, fast_threshold,
-                                          fast_fallback, fast_min_keypoints)
-        line_job = self._submit_line_jobs(frame) if self._lines_on else None
-        if self._pool is not None:
-            left = self.extractor.extract(frame.left, fast_threshold, fast_fallback, fast_min_keypoints)
-            right = right_job.result()
-        else:
-            left = self.extractor.extract(frame.left, fast_threshold, fast_fallback, fast_min_keypoints)
-            right = self.extractor_right.extract(frame.right, fast_threshold, fast_fallback, fast_min_keypoints)
-        timings["orb"] = _ms(t0)
-        t0 = time.perf_counter()
-        stereo = match_stereo(left, right, frame.left, frame.right, self.calib, self.params, noise_sigma)
-        if self.params.centre_level_keypoints:  # OpenCV's pyramid coordinates -> pixel centres
-            left, stereo = centre_keypoints(left, stereo, self.scale_factors, self.calib.width, self.calib.height)
-        self._stereo_last, self._stereo_obs = stereo, self._bearing_only_far(stereo)
-        timings["stereo"] = _ms(t0)
-        n_stereo = int(stereo.valid.sum())
-
+            _stage(timings, "noise_estimate", t0)
+        left, stereo, line_job = self._left_and_stereo(frame, (fast_threshold, fast_fallback, fast_min_keypoints),
+                                                       noise_sigma, timings)
+        if not isinstance(stereo, StereoJob):
+            stereo = self._stereo(stereo, timings)
         lines = None
         if line_job is not None:
             t0 = time.perf_counter()
@@ -251,18 +215,19 @@ class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, Tra
         if self._need_restart and 0 < self._lost_streak <= self.params.relocalise_bridge_frames:
             res = self._relocalise(frame, left, stereo, timings, lines)
         elif self._db_reloc_due():  # after the bridge, or the start in a loaded map (tracker_reloc)
-            res = self._relocalise_by_query(frame, left, stereo)
+            res = self._relocalise_by_query(frame, left, self._stereo(stereo, timings))
         elif not self._initialised or self._need_restart:
-            res = self._initialise(frame, left, stereo, n_stereo, lines)
-        else:
+            stereo = self._stereo(stereo, timings)
+            res = self._initialise(frame, left, stereo, int(stereo.valid.sum()), lines)
+        else:  # with parallel_stereo the search against the local map runs before the matches are in
             res = self._track_frame(frame, left, stereo, timings, lines)
-        res.n_stereo = n_stereo
+        res.n_stereo = int(self._stereo(stereo, timings).valid.sum())
         res.noise_sigma = noise_sigma
         if self._lines_on:
             self._finish_line_jobs(res.is_keyframe)
             timings.update(self._line_timings)
             self._line_timings.clear()
-        timings["total"] = _ms(t_all)
+        _stage(timings, "total", t_all)
         res.timings = timings
         return res
 
@@ -388,12 +353,12 @@ class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, Tra
         kp_words = as_words(feats.descriptors)
         view = self._map_view()
 
-        t0 = time.perf_counter()
+        t0 = _clock()
         X, r, ids, words = self._initial_matches(T_pred_cw, view, feats, kp_words)
-        timings["match_motion"] = _ms(t0)
-        t0 = time.perf_counter()
+        _stage(timings, "match_motion", t0)
+        t0 = _clock()
         T_cw, inliers = self._ransac(frame.index, X, feats.uv[r])
-        timings["pnp"] = _ms(t0)
+        _stage(timings, "pnp", t0)
         lview = self._line_map_view() if lines is not None else None
         from_prediction = False
         if T_cw is None and lview is not None and len(lview):
@@ -401,7 +366,7 @@ class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, Tra
             # line terms carry the pose (robust rounds sort out the stage-1 point outliers)
             T_cw, inliers, from_prediction = T_pred_cw, np.ones(len(X), bool), True
 
-        t0 = time.perf_counter()
+        t0 = _clock()
         est = None
         visible_ids = np.zeros(0, np.int64)
         line_obs = lq = lr = None
@@ -417,6 +382,7 @@ class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, Tra
                 timings["line_match"] = _ms(t1)
             if from_prediction:
                 # refine on lines + stage-1 points first, then search the local map from there
+                stereo = self._stereo(stereo, timings)
                 est = self._refine(T_cw, X, r, feats, stereo, inliers=inliers, line_obs=line_obs)
                 T_cw = est.T_cam_world
                 est = None
@@ -426,6 +392,7 @@ class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, Tra
                                            p.search_radius_local, scaled=True)
             q2 = sub[q2]
             visible_ids = view.ids[sub[in_view]]
+            stereo = self._stereo(stereo, timings)  # the worker's matches: needed from here on
             if len(q2) + n_lines >= p.min_inliers:
                 est = self._refine(T_cw, view.pos[q2], r2, feats, stereo, line_obs=line_obs)
                 if self._n_support(est) >= p.min_inliers:
@@ -434,7 +401,8 @@ class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, Tra
                     est = None
             if est is None:
                 est = self._refine(T_cw, X, r, feats, stereo, inliers=inliers, line_obs=line_obs)
-        timings["track_local_map"] = _ms(t0)
+        stereo = self._stereo(stereo, timings)
+        _stage(timings, "track_local_map", t0)  # includes the wait for the worker's stereo (its own stage)
         n_matches = len(r)
         if est is None:
             reason = LOST_TOO_FEW_MATCHES
@@ -463,7 +431,7 @@ class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, Tra
         self._seen.append((visible_ids, found_mask.astype(np.float64)))
 
         # ---- keyframe decision (AGRI §3.2.4, Eq. 6-7 after Kerl et al. 2013) ----
-        t0 = time.perf_counter()
+        t0 = _clock()
         self._frames_since_kf += 1
         from_ref = inliers & np.isin(ids, self._ref_ids)
         n_ref = int(from_ref.sum())
@@ -500,7 +468,7 @@ class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, Tra
             is_kf = False
         kf = self._make_keyframe(frame, feats, stereo, T_wc, matched_ids, lines=lines,
                                  line_matched=line_matched) if is_kf else None
-        timings["keyframe"] = _ms(t0)
+        _stage(timings, "keyframe", t0)
         ref = self._ref_kf
         T_ref_cam = se3_inv(self._T_ref) @ T_wc
         self._after_frame(T_wc, feats, stereo)
