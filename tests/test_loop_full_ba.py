@@ -254,3 +254,50 @@ def test_a_run_extending_a_loaded_map_continues_its_path_where_it_was_found(lap)
                         depth=kf.depth, octave=kf.octave, descriptors=kf.descriptors, landmark_ids=kf.landmark_ids)
     det.add_keyframe(new)
     assert det._path[100] == det._path[5] < det._path[N_KF - 1]
+
+
+def test_pixel_noise_estimate_is_the_gaussian_sigma_despite_outliers_and_pyramid_levels():
+    from canopy.loop.full_ba import estimate_pixel_noise
+
+    rng = np.random.default_rng(3)
+    n = 4000
+    octave = rng.integers(0, 4, n)
+    res = rng.normal(0.0, 0.4, (n, 3)) * (1.2 ** octave)[:, None]   # 0.4 px at level 0, scaled per level
+    res[: n // 2, 2] = np.nan                                          # monocular edges: no right residual
+    res[rng.choice(n, n // 20, replace=False)] += rng.choice([-1, 1], (n // 20, 3)) * 3.0  # 5 % gross outliers
+    est = estimate_pixel_noise(res, octave, 1.2, np.ones(n, bool))
+    assert abs(est - 0.4) < 0.04
+    assert np.isnan(estimate_pixel_noise(res, octave, 1.2, np.zeros(n, bool)))
+
+
+def _rms_error(poses, gt):
+    return float(np.sqrt(np.mean([np.sum((poses[k][:3, 3] - gt[k][:3, 3]) ** 2) for k in gt])))
+
+
+@pytest.mark.parametrize("corrupt", [0.0, 0.03])
+def test_full_ba_estimates_the_lap_noise_and_is_closer_to_the_exact_lap(lap, corrupt):
+    """The lap's keypoints carry 0.3 px of noise (and, second case, 3 % of the observations are off by
+    1.5 px per axis: inside the 1 px chi2 bound, 4.5 < 7.8, but 7 sigma off the real noise). The first
+    pass's residuals give 0.3 px back (the fitted landmarks absorb part of the noise: without the
+    degrees-of-freedom correction the estimate is 0.24 px and the test drops good edges), and the
+    outlier test and second pass at that noise give a lap closer to the exact one than at 1 px."""
+    from dataclasses import replace as dc_replace
+
+    rng = np.random.default_rng(11)
+    kfs = {}
+    for k, kf in lap["keyframes"].items():
+        uv = kf.uv.copy()
+        bad = rng.random(len(uv)) < corrupt
+        uv[bad] += rng.choice([-1.5, 1.5], (int(bad.sum()), 2))
+        kfs[k] = PlaceKeyframe(index=k, timestamp=kf.timestamp, T_world_cam=kf.T_world_cam, uv=uv, u_right=kf.u_right,
+                               depth=kf.depth, octave=kf.octave, descriptors=kf.descriptors, landmark_ids=kf.landmark_ids)
+    alias = {10000 + j: j for j in lap["duplicated"]}
+    fixed = global_bundle_adjust(kfs, lap["drifted"], lap["positions"], CALIB,
+                                 dc_replace(LoopParams(), full_ba_estimate_noise=False), alias=dict(alias), fixed=0)
+    est = global_bundle_adjust(kfs, lap["drifted"], lap["positions"], CALIB, LoopParams(), alias=dict(alias), fixed=0)
+    e_fixed, e_est = _rms_error(fixed.poses, lap["gt"]), _rms_error(est.poses, lap["gt"])
+    print(f"1 px: {fixed.n_outliers} outliers, rms {e_fixed:.4f} m; estimated {est.pixel_sigma:.3f} px: "
+          f"{est.n_outliers} outliers, rms {e_est:.4f} m")
+    assert fixed.pixel_sigma == 1.0 and abs(est.pixel_sigma - 0.3) < (0.02 if corrupt == 0 else 0.04)
+    assert est.n_outliers > fixed.n_outliers
+    assert e_est < 0.9 * e_fixed
