@@ -301,3 +301,32 @@ def test_full_ba_estimates_the_lap_noise_and_is_closer_to_the_exact_lap(lap, cor
     assert fixed.pixel_sigma == 1.0 and abs(est.pixel_sigma - 0.3) < (0.02 if corrupt == 0 else 0.04)
     assert est.n_outliers > fixed.n_outliers
     assert e_est < 0.9 * e_fixed
+
+
+@pytest.mark.parametrize("tree", [True, False])
+def test_a_keyframe_added_during_the_full_ba_moves_with_its_spanning_tree_parent(lap, tree):
+    """A keyframe inserted after the BA's snapshot (here: back at keyframe 12's place, seeing its
+    landmarks) is moved with its parent's correction (ORB-SLAM RunGlobalBundleAdjustment), not with
+    that of the newest keyframe the BA adjusted (23, half a lap away: a different correction)."""
+    from canopy.loop.full_ba import run_ba_job
+    from canopy.loop.pose_graph import correction_for
+
+    closer = _closer_with_lap(lap, full_ba_tree_corrections=tree)
+    closer.alias.update({10000 + j: j for j in lap["duplicated"]})
+    job = closer.ba_job()                       # the snapshot: keyframes 0..23
+    kf = lap["keyframes"][12]
+    closer.add_known_keyframe(PlaceKeyframe(index=100, timestamp=100.0, T_world_cam=lap["drifted"][12].copy(),
+                                            uv=kf.uv, u_right=kf.u_right, depth=kf.depth, octave=kf.octave,
+                                            descriptors=kf.descriptors, landmark_ids=kf.landmark_ids))
+    assert closer.parent[100] == 12
+    result = closer.accept_ba(run_ba_job(job))
+    assert 100 not in job["poses"]
+    moved = correction_for(100, result.corrections) @ lap["drifted"][12]   # as local mapping applies it
+    err = np.linalg.norm(closer.poses[100][:3, 3] - lap["gt"][12][:3, 3])
+    print(f"tree={tree}: keyframe 100 {err:.4f} m from its true place")
+    assert np.allclose(moved, closer.poses[100])
+    if tree:
+        assert np.allclose(result.corrections[100], result.corrections[12])
+        assert err < 0.03
+    else:
+        assert err > 0.1

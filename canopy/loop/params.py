@@ -83,6 +83,9 @@ class LoopParams:
     full_ba_estimate_noise: bool = True
     full_ba_noise_min_px: float = 0.2
     full_ba_noise_max_px: float = 2.0
+    # keyframes inserted while the full BA ran follow their spanning-tree parent's correction
+    # (ORB-SLAM RunGlobalBundleAdjustment); off: the nearest older keyframe's
+    full_ba_tree_corrections: bool = True
     # landmark fusion across the loop (ORB-SLAM SearchAndFuse): candidate-side landmarks
     # projected into the query side's keyframes after the correction
     fuse: bool = True
