@@ -119,43 +119,32 @@ def test_fusion_finds_the_duplicates_across_the_loop(lap):
     assert alias == fused
 
 
-class _RecordingContext:
-    """The actor's side of the runtime that the full BA uses: what it sends is kept."""
-
-    def __init__(self):
-        self.sent, self.extra = [], {}
-
-    def send(self, target, msg, block=True):
-        self.sent.append((target, msg))
-        return True
-
-    def heartbeat(self):
-        pass
-
-
-def test_loop_closer_actor_runs_the_full_ba_in_a_child_process(lap):
-    from actors.loop_closing import LoopClosingActor
+def test_loop_closer_worker_runs_the_full_ba_in_a_child_process(lap):
     from canopy.loop.closer import LoopCloser
     from canopy.loop.pose_graph import correction_for
+    from canopy.loop.worker import LoopWorker
 
-    actor = LoopClosingActor({}, seed=0)
-    actor.closer = LoopCloser(CALIB, LoopParams(), None)
-    actor._ba = None
-    actor.closer.detector.keyframes.update(lap["keyframes"])
-    actor.closer.poses = {k: T.copy() for k, T in lap["drifted"].items()}
-    actor.closer.positions = dict(lap["positions"])
-    actor.closer.alias = {10000 + j: j for j in lap["duplicated"]}
-    actor.closer.ba_pending = True
-    ctx = _RecordingContext()
-    actor._finish_ba(ctx)           # starts the child process and waits for its answer
-    assert actor._ba is None and not actor.closer.ba_pending and actor.closer.epoch == 1
-    answers = [m for _, m in ctx.sent if m.global_ba]
-    assert len(answers) == 1 and "global_ba_error" not in ctx.extra
+    closer = LoopCloser(CALIB, LoopParams(), None)
+    closer.detector.keyframes.update(lap["keyframes"])
+    closer.poses = {k: T.copy() for k, T in lap["drifted"].items()}
+    closer.positions = dict(lap["positions"])
+    closer.alias = {10000 + j: j for j in lap["duplicated"]}
+    closer.ba_pending = True
+    worker = LoopWorker(closer, None, niceness=0)
+    worker._finish_ba()           # starts the child process and waits for its answer (no thread here)
+    assert worker._ba is None and not closer.ba_pending and closer.epoch == 1
+    out = []
+    while not worker.outbox.empty():
+        out.append(worker.outbox.get_nowait())
+    answers = [item[2] for item in out if item[0] == "send" and item[2].global_ba]
+    extra = {k: v for item in out if item[0] == "extra" for k, v in item[1].items()}
+    assert len(answers) == 1 and "global_ba_error" not in extra
+    assert 0.25 < extra["global_ba_pixel_sigma"] < 0.35      # the lap's 0.3 px, estimated in the child
     corrections = dict(zip(answers[0].keyframe_ids.tolist(), answers[0].corrections))
     moved = {k: correction_for(k, corrections) @ T for k, T in lap["drifted"].items()}
     t, r = _max_errors(moved, lap["gt"])
     assert t < 0.03 and r < 0.2     # local mapping's drifted map, corrected, is the exact lap
-    assert all(np.allclose(actor.closer.poses[k], moved[k]) for k in moved)
+    assert all(np.allclose(closer.poses[k], moved[k]) for k in moved)
 
 
 def test_fused_landmark_is_merged_in_the_map_and_tracking_sees_the_kept_one():

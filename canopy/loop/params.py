@@ -98,10 +98,12 @@ class LoopParams:
     fuse_before_pose_graph: bool = True
     loop_connection_min_shared: int = 15
     # --- process -------------------------------------------------------------------------
-    # the loop closer (and its full-BA child) runs at a lower CPU priority: its answers are
-    # applied whenever they arrive, so on a busy machine it should yield to tracking and
-    # local mapping rather than share the cores with them equally (0: same priority)
-    niceness: int = 5
+    # the loop closer's work (database query, verification, pose graph) runs in a worker thread,
+    # and the full BA in a child process, at this nice value; the actor's own thread (messages,
+    # heartbeat) keeps the normal priority (canopy.loop.worker, canopy.loop.priority). Its answers
+    # are applied whenever they arrive, so it takes the cycles tracking and local mapping leave;
+    # at the end of the stream it goes back to normal priority (0: no renicing)
+    niceness: int = 19
     # --- relocalisation -------------------------------------------------------------------
     reloc_min_inliers: int = 30
     reloc_candidates: int = 5             # database candidates tried per frame, best score first
