@@ -2,11 +2,12 @@
 correction back to local mapping (which forwards the corrected map to tracking).
 
 A thin loop around ``canopy.loop.worker.LoopWorker``, which owns the ``LoopCloser`` and does all
-of its work in a worker thread niced to ``loop.niceness`` (19), with the full bundle adjustment
-(AGRI §3.4.2) after a loop in a forked child process niced alike; this thread only hands
+of its work in a forked worker process niced to ``loop.niceness`` (19), with the full bundle
+adjustment (AGRI §3.4.2) after a loop in a child of it niced alike; this actor only hands
 keyframes over and sends what the worker produces, at normal priority, so its messages and the
 heartbeat are never starved when tracking and local mapping keep the cores busy (issue 10: the
-loop closer never delays tracking). Every keyframe is answered with a ``LoopResult`` (closed or
+loop closer never delays tracking). A process rather than a thread: a niced thread holding the
+GIL starves the actor's thread on a loaded machine (``canopy.loop.worker``). Every keyframe is answered with a ``LoopResult`` (closed or
 not); closed loops also go to the supervisor, which counts them in the outputs. Tracking never
 waits on this actor. The service time in stats.json is the hand-over; the worker's own time per
 keyframe is ``extra.step_ms_p50`` / ``step_ms_p95``.
@@ -98,7 +99,7 @@ class LoopClosingActor(Actor):
             if time.monotonic() - last >= KEEPALIVE_S:
                 last = time.monotonic()
                 ctx.heartbeat()
-                ctx.send("local_mapping", LoopResult(keyframe_index=-1, loops=self.closer.n_loops,
+                ctx.send("local_mapping", LoopResult(keyframe_index=-1, loops=int(ctx.extra.get("loops", 0)),
                                                      sent_at=time.time()), block=False)
 
     def teardown(self, ctx: ActorContext) -> None:

@@ -130,7 +130,7 @@ def test_loop_closer_worker_runs_the_full_ba_in_a_child_process(lap):
     closer.positions = dict(lap["positions"])
     closer.alias = {10000 + j: j for j in lap["duplicated"]}
     closer.ba_pending = True
-    worker = LoopWorker(closer, None, niceness=0)
+    worker = LoopWorker(closer, None, niceness=0, process=False)
     worker._finish_ba()           # starts the child process and waits for its answer (no thread here)
     assert worker._ba is None and not closer.ba_pending and closer.epoch == 1
     out = []

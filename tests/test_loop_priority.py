@@ -82,7 +82,8 @@ def test_bad_niceness_is_named():
         set_thread_niceness(25)
 
 
-def test_loop_worker_thread_runs_niced_and_finishes_at_normal_priority():
+@pytest.mark.parametrize("process", [True, False])
+def test_loop_worker_runs_niced_and_finishes_at_normal_priority(process):
     from canopy.loop.closer import LoopCloser
     from canopy.loop.params import LoopParams
     from canopy.loop.worker import LoopWorker
@@ -90,21 +91,52 @@ def test_loop_worker_thread_runs_niced_and_finishes_at_normal_priority():
 
     calib = StereoCalibration(fx=450.0, fy=450.0, cx=376.0, cy=240.0, baseline=0.11, width=752, height=480)
     main = thread_niceness()
-    worker = LoopWorker(LoopCloser(calib, LoopParams(), None), None, niceness=19)
+    worker = LoopWorker(LoopCloser(calib, LoopParams(), None), None, niceness=19, process=process)
     worker.start()
     try:
+        first = worker.outbox.get(timeout=30)   # the worker has started (and reniced itself)
+        assert first == ("extra", {"worker_niceness": 19, "worker_process": process})
         assert thread_niceness(worker.thread_id) == 19 and thread_niceness() == main
         worker.finish()
         items = [worker.outbox.get(timeout=10)]
         while items[-1][0] != "done":
             items.append(worker.outbox.get(timeout=10))
-        assert ("extra", {"worker_niceness": 19}) in items
         extra = {k: v for kind, *rest in items if kind == "extra" for k, v in rest[0].items()}
         # the end of the stream is not slowed (where this process may raise a thread's priority again)
         assert extra["worker_niceness_at_end"] == (0 if _may_raise_priority() else 19)
     finally:
         worker.stop()
     assert not worker.alive()
+
+
+def test_renicing_a_process_tree_reaches_its_threads_and_children():
+    import multiprocessing
+
+    from canopy.loop.priority import set_tree_niceness
+
+    mp = multiprocessing.get_context("fork")
+    parent, child = mp.Pipe(duplex=False)
+    go = mp.Event()
+    p = mp.Process(target=_tree, args=(child, go))
+    p.start()
+    try:
+        pids = parent.recv()                      # (its own thread, its child process), both at 19
+        assert all(thread_niceness(t) == 19 for t in pids)
+        assert set_tree_niceness(p.pid, 3) >= 2
+        assert all(thread_niceness(t) == 3 for t in pids)
+    finally:
+        go.set()
+        p.join(10)
+
+
+def _tree(conn, go):
+    import multiprocessing
+    set_thread_niceness(19)
+    c = multiprocessing.get_context("fork").Process(target=go.wait, args=(10,))
+    c.start()
+    conn.send((threading.get_native_id(), c.pid))
+    go.wait(10)
+    c.join(10)
 
 
 def _may_raise_priority() -> bool:

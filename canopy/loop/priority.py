@@ -59,3 +59,30 @@ def set_process_niceness(pid: int, niceness: int) -> bool:
     except (PermissionError, ProcessLookupError, OSError):
         return False
     return True
+
+
+def set_tree_niceness(pid: int, niceness: int) -> int:
+    """Set the nice value of every thread of process ``pid`` and of its descendants (Linux
+    /proc: ``task/<tid>/children``), e.g. the loop closer's worker process and its full-BA child.
+    Returns the number of threads set."""
+    n = _check(niceness)
+    if not PER_THREAD:
+        return 0
+    done, todo, seen = 0, [int(pid)], set()
+    while todo:
+        p = todo.pop()
+        if p in seen:
+            continue
+        seen.add(p)
+        try:
+            tids = [int(t) for t in os.listdir(f"/proc/{p}/task")]
+        except OSError:
+            continue
+        for t in tids:
+            done += set_thread_niceness(n, t)
+            try:
+                with open(f"/proc/{p}/task/{t}/children") as f:
+                    todo.extend(int(c) for c in f.read().split())
+            except OSError:
+                pass
+    return done

@@ -1,24 +1,32 @@
-"""The loop closer's work in a worker thread at low CPU priority (issue 10: the loop closer
-never delays tracking).
+"""The loop closer's work at low CPU priority (issue 10: the loop closer never delays tracking).
 
 ``LoopWorker`` owns the ``LoopCloser``: keyframe messages handed over with ``submit`` are turned
 into place keyframes (bag of words), queried, verified and, on a loop, corrected by the pose
-graph, in a thread niced to ``niceness`` (19: it runs on cycles tracking and local mapping leave;
+graph, niced to ``niceness`` (19: it runs on cycles tracking and local mapping leave;
 ``canopy.loop.priority``). After a loop the full bundle adjustment (AGRI §3.4.2) runs on a
-snapshot of the map in a forked child process, niced alike (GTSAM holds the GIL for a whole LM
-step, seconds on a 400-keyframe map, so a thread would stall the actor; ORB-SLAM runs its global
-BA in a thread of the loop closer). A newer loop stops a running BA and starts another.
+snapshot of the map in a forked child, niced alike (GTSAM holds the GIL for a whole LM step,
+seconds on a 400-keyframe map; ORB-SLAM runs its global BA in a thread of the loop closer).
+A newer loop stops a running BA and starts another.
+
+By default the work runs in a forked worker *process*, not a thread of the actor: a niced thread
+that holds the GIL (a GTSAM call, a numpy or pure-Python stretch) is scheduled so rarely on a
+loaded machine that the actor's normal-priority thread waits for the GIL for seconds: at load 30
+on 2 cores a nice-19 thread in a GIL-holding C call delayed the other thread by 6.5 s (pure
+Python: 2.2 s; the same thread at nice 0: 0.8 s), and the supervisor ended a monocular KITTI run
+for a missed 5 s heartbeat of the loop closer. A process shares no GIL. ``process=False`` runs the
+same loop in a thread (tests).
 
 Nothing here touches ZeroMQ: what is to be sent comes out of ``outbox`` as
 ("send", target, message), ("publish", message), ("extra", dict) and ("done", None) / ("error",
 text) items, and the actor's main thread (normal priority, which also keeps the heartbeat) sends
-them. ``finish()`` at the end of the stream renices the thread and a running BA back to normal
+them. ``finish()`` at the end of the stream renices the worker and a running BA back to normal
 priority (the run is not slowed at its end), lets the worker take the remaining keyframes, waits
 for the full BA (the final map carries it) and ends with ("done", None).
 """
 from __future__ import annotations
 
 import multiprocessing
+import os
 import queue
 import threading
 import time
@@ -29,11 +37,12 @@ import numpy as np
 from canopy.loop.database import FeatureStats
 from canopy.loop.full_ba import ba_worker
 from canopy.loop.keyframe import PlaceKeyframe, with_bow
-from canopy.loop.priority import set_process_niceness, set_thread_niceness, thread_niceness
+from canopy.loop.priority import set_process_niceness, set_thread_niceness, set_tree_niceness, thread_niceness
 from protocol.messages import LoopKeyframe, LoopResult
 
 BA_POLL_S = 0.2   # how often the worker looks for the full BA's answer while it runs
-_END, _STOP = object(), object()
+IDLE_POLL_S = 1.0  # an idle worker process checks this often that the actor is still there
+_END, _STOP = "__end_of_stream__", "__stop__"   # strings: they cross a process boundary
 
 
 def place_keyframe(msg: LoopKeyframe, vocabulary) -> PlaceKeyframe:
@@ -55,24 +64,33 @@ def _ba_child(conn, job: dict, niceness: int) -> None:
 
 
 class LoopWorker:
-    def __init__(self, closer, vocabulary, niceness: int = 19):
+    def __init__(self, closer, vocabulary, niceness: int = 19, process: bool = True):
         self.closer = closer
         self.vocabulary = vocabulary
         self.niceness = int(niceness)
-        self.inbox: queue.Queue = queue.Queue()
-        self.outbox: queue.Queue = queue.Queue()
+        self.process = bool(process)
+        ctx = multiprocessing.get_context("fork")
+        self.inbox = ctx.Queue() if process else queue.Queue()
+        self.outbox = ctx.Queue() if process else queue.Queue()
         self.step_ms: list[float] = []       # the worker's real time per keyframe (BoW, query, verification, PGO)
         self._ba = None                      # (child process, pipe, epoch of its snapshot, start time)
-        self._thread: threading.Thread | None = None
+        self._runner = None                  # the worker thread or process
         self._tid: int | None = None
+        self._parent = os.getpid()
         self._started = threading.Event()
         self._finishing = threading.Event()
 
-    # ------------------------------------------------------------------ main thread side
+    # ------------------------------------------------------------------ actor side
     def start(self) -> None:
-        self._thread = threading.Thread(target=self._run, name="loop-closer-worker", daemon=True)
-        self._thread.start()
-        self._started.wait(10.0)
+        if self.process:
+            # not a daemon: it forks the full-BA child; it leaves when the actor goes (IDLE_POLL_S)
+            self._runner = multiprocessing.get_context("fork").Process(target=self._run, name="canopy-loop-worker")
+            self._runner.start()
+            self._tid = self._runner.pid
+        else:
+            self._runner = threading.Thread(target=self._run, name="loop-closer-worker", daemon=True)
+            self._runner.start()
+            self._started.wait(10.0)
 
     def submit(self, msg: LoopKeyframe) -> None:
         self.inbox.put(msg)
@@ -80,26 +98,37 @@ class LoopWorker:
     def finish(self) -> None:
         """End of the stream: the remaining work at normal priority, then ("done", None)."""
         self._finishing.set()
-        if self._tid is not None and self.niceness > 0:
-            set_thread_niceness(0, self._tid)
-        ba = self._ba
-        if ba is not None and self.niceness > 0:
-            set_process_niceness(ba[0].pid, 0)
+        if self.niceness > 0 and self._tid is not None:
+            if self.process:  # every thread of the worker process and its full-BA child
+                set_tree_niceness(self._tid, 0)
+            else:
+                set_thread_niceness(0, self._tid)
+                ba = self._ba
+                if ba is not None:
+                    set_process_niceness(ba[0].pid, 0)
         self.inbox.put(_END)
 
     def stop(self) -> None:
-        """Teardown: the thread leaves after its current step, a running BA is stopped."""
-        self.inbox.put(_STOP)
-        if self._thread is not None:
-            self._thread.join(30.0)
-        if self._ba is not None:
+        """Teardown: the worker leaves after its current step, a running BA is stopped."""
+        if self._runner is None:
+            return
+        try:
+            self.inbox.put(_STOP)
+        except (OSError, ValueError):
+            pass
+        self._runner.join(30.0)
+        if self.process and self._runner.is_alive():
+            self._runner.terminate()
+            self._runner.join(5.0)
+        if not self.process and self._ba is not None:
             self._stop_ba()
 
     def alive(self) -> bool:
-        return self._thread is not None and self._thread.is_alive()
+        return self._runner is not None and self._runner.is_alive()
 
     @property
     def thread_id(self) -> int | None:
+        """Native id of the worker thread, or pid of the worker process."""
         return self._tid
 
     def step_stats(self) -> dict:
@@ -109,12 +138,12 @@ class LoopWorker:
         return {"step_ms_p50": float(np.percentile(a, 50)), "step_ms_p95": float(np.percentile(a, 95)),
                 "step_ms_max": float(a.max()), "steps": len(self.step_ms)}
 
-    # ------------------------------------------------------------------ worker thread
+    # ------------------------------------------------------------------ worker thread / process
     def _run(self) -> None:
         self._tid = threading.get_native_id()
         if self.niceness > 0 and not self._finishing.is_set():
-            set_thread_niceness(self.niceness)
-        self.outbox.put(("extra", {"worker_niceness": thread_niceness()}))
+            set_thread_niceness(self.niceness)   # a process: its only thread; the queue's feeder inherits it
+        self.outbox.put(("extra", {"worker_niceness": thread_niceness(), "worker_process": self.process}))
         self._started.set()
         try:
             while True:
@@ -123,14 +152,25 @@ class LoopWorker:
                 elif self.closer.ba_pending:
                     timeout = 0.0
                 else:
-                    timeout = None
+                    timeout = IDLE_POLL_S if self.process else None
                 try:
                     item = self.inbox.get(timeout=timeout) if timeout != 0.0 else self.inbox.get_nowait()
                 except queue.Empty:
                     item = None
-                if item is _STOP:
+                    if self.process and os.getppid() != self._parent:  # the actor is gone
+                        item = _STOP
+                if isinstance(item, str) and item == _STOP:
+                    if self._ba is not None:
+                        self._stop_ba()
                     return
-                if item is _END:
+                if isinstance(item, str) and item == _END:
+                    # normal priority from here (finish() reniced this worker already where it could;
+                    # a BA started since then was forked niced)
+                    self._finishing.set()
+                    if self.niceness > 0:
+                        set_thread_niceness(0)
+                        if self._ba is not None:
+                            set_process_niceness(self._ba[0].pid, 0)
                     self._finish_ba()
                     self.outbox.put(("extra", {**self.step_stats(), "worker_niceness_at_end": thread_niceness()}))
                     self.outbox.put(("done", None))
@@ -143,6 +183,10 @@ class LoopWorker:
                     self._start_ba()
         except Exception as exc:  # the actor's main thread reports it (an actor never dies silently)
             self.outbox.put(("error", f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"))
+        finally:
+            if self.process:  # everything put is delivered before the process ends
+                self.outbox.close()
+                self.outbox.join_thread()
 
     def step(self, msg: LoopKeyframe) -> None:
         """One keyframe: bag of words, detection, verification and, on a loop, the pose graph."""
