@@ -60,6 +60,9 @@ class LoopCloser:
         # sent before local mapping applied epoch e carries poses that are brought up to date
         self.epoch = 0
         self.epoch_corrections: dict[int, dict[int, np.ndarray]] = {}
+        # spanning tree (ORB-SLAM): each keyframe's parent is the older keyframe it shared most
+        # landmarks with when it was inserted; a keyframe a full BA did not see follows its parent
+        self.parent: dict[int, int] = {}
 
     def _store_landmarks(self, kf: PlaceKeyframe) -> None:
         P = np.asarray(kf.landmark_positions, float).reshape(-1, 3)
@@ -117,11 +120,21 @@ class LoopCloser:
         self.epoch += 1
         self.epoch_corrections[self.epoch] = corrections
 
+    def _set_parent(self, k: int) -> None:
+        older = {j: n for j, n in self.detector.covisibility.neighbours(k, 1).items() if j < k}
+        if older:
+            self.parent[k] = max(older, key=lambda j: (older[j], j))
+        else:  # shares nothing (a new map segment): the keyframe before it
+            prev = [j for j in self.poses if j < k]
+            if prev:
+                self.parent[k] = max(prev)
+
     def add_known_keyframe(self, kf: PlaceKeyframe) -> None:
         """A keyframe of a loaded map: pose, landmarks and database entry, no loop query."""
         self.poses[kf.index] = np.asarray(kf.T_world_cam, float).copy()
         self._store_landmarks(kf)
         self.detector.add_known_keyframe(kf)
+        self._set_parent(kf.index)
 
     def add_keyframe(self, kf: PlaceKeyframe, window_poses: dict[int, np.ndarray] | None = None,
                      epoch: int | None = None) -> LoopClosure | None:
@@ -136,6 +149,7 @@ class LoopCloser:
         self.poses[kf.index] = np.asarray(kf.T_world_cam, float)
         self._store_landmarks(kf)
         constraint = self.detector.add_keyframe(kf)
+        self._set_parent(kf.index)
         t_detect = (time.perf_counter() - t0) * 1e3
         if constraint is None:
             return None
@@ -249,10 +263,34 @@ class LoopCloser:
                 "positions": dict(self.positions), "calib": self.calib, "params": self.params,
                 "alias": dict(self.alias), "fixed": min(self.poses), "epoch": self.epoch}
 
+    def tree_corrections(self, corrections: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
+        """``corrections`` of a full BA extended to every keyframe of this closer it did not adjust
+        (inserted after its snapshot, or without landmarks): each takes the correction of its
+        nearest spanning-tree ancestor that the BA adjusted (ORB-SLAM RunGlobalBundleAdjustment:
+        T_child' = T_child T_parent^-1 T_parent', i.e. the parent's correction C = T_parent' T_parent^-1)."""
+        out = dict(corrections)
+        for k in sorted(self.poses):
+            if k in out:
+                continue
+            chain, j = [], k
+            while j not in out and j in self.parent and len(chain) < len(self.poses):
+                chain.append(j)
+                j = self.parent[j]
+            C = out.get(j)
+            if C is None:  # no adjusted ancestor (a keyframe older than the BA's gauge): nearest older
+                C = correction_for(int(k), corrections)
+            for c in chain or [k]:
+                out[c] = C
+        return out
+
     def accept_ba(self, result: GlobalBAResult) -> GlobalBAResult:
-        """Take a full BA's answer into this closer's map: keyframes move by its corrections
-        (those added since it started with the nearest older one), its landmarks take its
-        positions, the others move with their reference keyframe; a new epoch."""
+        """Take a full BA's answer into this closer's map: keyframes it adjusted move by its
+        corrections, the others (added since it started) with their spanning-tree parent's
+        (``tree_corrections``; ``result.corrections`` is extended with them, so local mapping moves
+        them alike), its landmarks take its positions, the others move with their reference
+        keyframe; a new epoch."""
+        if self.params.full_ba_tree_corrections:
+            result.corrections = self.tree_corrections(result.corrections)
         for k in list(self.poses):
             self.poses[k] = correction_for(int(k), result.corrections) @ self.poses[k]
         self._correct_positions(result.corrections)

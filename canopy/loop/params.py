@@ -76,6 +76,16 @@ class LoopParams:
     full_ba_iterations: int = 10          # Levenberg-Marquardt iterations per pass
     full_ba_passes: int = 2               # robust pass, drop chi2 outliers, refine (ORB-SLAM GBA)
     full_ba_min_observations: int = 2     # a landmark seen once constrains no pose
+    # the outlier test and the second pass use the pixel noise estimated from the first pass's
+    # residuals (1.4826 MAD, full_ba.estimate_pixel_noise) instead of pixel_sigma, clamped to
+    # [full_ba_noise_min_px, full_ba_noise_max_px] (day-loop: 0.35 px; the 1 px assumption kept
+    # 3-sigma outliers in the second pass)
+    full_ba_estimate_noise: bool = True
+    full_ba_noise_min_px: float = 0.2
+    full_ba_noise_max_px: float = 2.0
+    # keyframes inserted while the full BA ran follow their spanning-tree parent's correction
+    # (ORB-SLAM RunGlobalBundleAdjustment); off: the nearest older keyframe's
+    full_ba_tree_corrections: bool = True
     # landmark fusion across the loop (ORB-SLAM SearchAndFuse): candidate-side landmarks
     # projected into the query side's keyframes after the correction
     fuse: bool = True
@@ -88,10 +98,12 @@ class LoopParams:
     fuse_before_pose_graph: bool = True
     loop_connection_min_shared: int = 15
     # --- process -------------------------------------------------------------------------
-    # the loop closer (and its full-BA child) runs at a lower CPU priority: its answers are
-    # applied whenever they arrive, so on a busy machine it should yield to tracking and
-    # local mapping rather than share the cores with them equally (0: same priority)
-    niceness: int = 5
+    # the loop closer's work (database query, verification, pose graph) runs in a worker thread,
+    # and the full BA in a child process, at this nice value; the actor's own thread (messages,
+    # heartbeat) keeps the normal priority (canopy.loop.worker, canopy.loop.priority). Its answers
+    # are applied whenever they arrive, so it takes the cycles tracking and local mapping leave;
+    # at the end of the stream it goes back to normal priority (0: no renicing)
+    niceness: int = 19
     # --- relocalisation -------------------------------------------------------------------
     reloc_min_inliers: int = 30
     reloc_candidates: int = 5             # database candidates tried per frame, best score first
@@ -130,6 +142,8 @@ class LoopParams:
         need(self.robust_kernel_k > 0, "robust_kernel_k", "must be > 0")
         need(self.full_ba_iterations >= 1 and self.full_ba_passes >= 1, "full_ba_iterations",
              "and full_ba_passes must be >= 1")
+        need(0 < self.full_ba_noise_min_px <= self.full_ba_noise_max_px, "full_ba_noise_min_px",
+             "must be > 0 and <= full_ba_noise_max_px")
         need(self.full_ba_min_observations >= 1, "full_ba_min_observations", "must be >= 1")
         need(self.fuse_neighbours >= 0, "fuse_neighbours", "must be >= 0")
         need(self.fuse_radius > 0, "fuse_radius", "must be > 0")

@@ -1,0 +1,88 @@
+"""CPU priority of the loop closer's work (issue 10: "the loop closer never delays tracking").
+
+The loop closer's answers are applied whenever they arrive, so its work (database query,
+verification, pose graph, full BA) can wait for free cores; the loop-closing actor's message
+loop and heartbeat cannot (the supervisor ends a run whose actor misses heartbeats). So the
+work runs in a worker thread niced alone, and the actor's main thread keeps the normal priority.
+
+On Linux the nice value is a per-thread attribute: ``setpriority(PRIO_PROCESS, tid, n)`` with
+a thread id (``threading.get_native_id()``) renices that thread only (setpriority(2), NOTES),
+and a process forked from the thread starts with its nice value. Elsewhere these helpers change
+nothing and say so (their return value).
+"""
+from __future__ import annotations
+
+import os
+import sys
+import threading
+
+from shared.errors import ConfigError
+
+PER_THREAD = sys.platform.startswith("linux")  # nice values are per thread only on Linux
+
+
+def _check(niceness: int) -> int:
+    n = int(niceness)
+    if not -20 <= n <= 19:
+        raise ConfigError("niceness", f"must be in [-20, 19] (got {niceness!r})")
+    return n
+
+
+def thread_niceness(tid: int | None = None) -> int | None:
+    """Nice value of thread ``tid`` (default: the calling thread); None where not per-thread."""
+    if not PER_THREAD:
+        return None
+    return os.getpriority(os.PRIO_PROCESS, threading.get_native_id() if tid is None else int(tid))
+
+
+def set_thread_niceness(niceness: int, tid: int | None = None) -> bool:
+    """Set the nice value of one thread (default: the calling thread), leaving the process's
+    other threads as they are. Raising the priority again (a lower value) needs CAP_SYS_NICE
+    or RLIMIT_NICE; returns False when it was not allowed or the platform has no per-thread
+    nice value, True when set."""
+    n = _check(niceness)
+    if not PER_THREAD:
+        return False
+    try:
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id() if tid is None else int(tid), n)
+    except (PermissionError, ProcessLookupError):
+        return False
+    return True
+
+
+def set_process_niceness(pid: int, niceness: int) -> bool:
+    """Set the nice value of a (single-threaded) child process, e.g. the full-BA child; False
+    if not allowed or the process is gone."""
+    n = _check(niceness)
+    try:
+        os.setpriority(os.PRIO_PROCESS, int(pid), n)
+    except (PermissionError, ProcessLookupError, OSError):
+        return False
+    return True
+
+
+def set_tree_niceness(pid: int, niceness: int) -> int:
+    """Set the nice value of every thread of process ``pid`` and of its descendants (Linux
+    /proc: ``task/<tid>/children``), e.g. the loop closer's worker process and its full-BA child.
+    Returns the number of threads set."""
+    n = _check(niceness)
+    if not PER_THREAD:
+        return 0
+    done, todo, seen = 0, [int(pid)], set()
+    while todo:
+        p = todo.pop()
+        if p in seen:
+            continue
+        seen.add(p)
+        try:
+            tids = [int(t) for t in os.listdir(f"/proc/{p}/task")]
+        except OSError:
+            continue
+        for t in tids:
+            done += set_thread_niceness(n, t)
+            try:
+                with open(f"/proc/{p}/task/{t}/children") as f:
+                    todo.extend(int(c) for c in f.read().split())
+            except OSError:
+                pass
+    return done

@@ -1,0 +1,152 @@
+"""The loop closer's niceness helpers and its worker thread (canopy.loop.priority, canopy.loop.worker):
+one thread reniced, the rest of the process (the actor's messages and heartbeat) left alone."""
+from __future__ import annotations
+
+import os
+import threading
+
+import pytest
+
+from canopy.loop.priority import PER_THREAD, set_process_niceness, set_thread_niceness, thread_niceness
+from shared.errors import ConfigError
+
+pytestmark = pytest.mark.skipif(not PER_THREAD, reason="nice values are per thread only on Linux")
+
+
+def test_renicing_one_thread_leaves_the_calling_thread_alone():
+    main = thread_niceness()
+    seen = {}
+
+    def work():
+        seen["ok"] = set_thread_niceness(19)
+        seen["mine"] = thread_niceness()
+        seen["tid"] = threading.get_native_id()
+
+    t = threading.Thread(target=work)
+    t.start()
+    t.join()
+    assert seen["ok"] and seen["mine"] == 19
+    assert thread_niceness() == main            # the caller's thread is untouched
+    assert os.getpriority(os.PRIO_PROCESS, os.getpid()) == main
+
+
+def test_another_thread_is_reniced_by_its_id_and_back_when_allowed():
+    ready, release = threading.Event(), threading.Event()
+    box = {}
+
+    def work():
+        box["tid"] = threading.get_native_id()
+        set_thread_niceness(19)
+        ready.set()
+        release.wait(10)
+
+    t = threading.Thread(target=work)
+    t.start()
+    ready.wait(10)
+    try:
+        assert thread_niceness(box["tid"]) == 19
+        back = set_thread_niceness(0, box["tid"])   # raising priority needs CAP_SYS_NICE / RLIMIT_NICE
+        assert thread_niceness(box["tid"]) == (0 if back else 19)
+    finally:
+        release.set()
+        t.join()
+
+
+def test_a_process_forked_from_a_niced_thread_starts_niced():
+    import multiprocessing
+
+    mp = multiprocessing.get_context("fork")
+    parent, child = mp.Pipe(duplex=False)
+    box = {}
+
+    def work():
+        set_thread_niceness(19)
+        p = mp.Process(target=_report_niceness, args=(child,))
+        p.start()
+        box["child"] = parent.recv()
+        p.join(10)
+
+    t = threading.Thread(target=work)
+    t.start()
+    t.join(30)
+    assert box["child"] == 19
+    assert not set_process_niceness(2**22 + 12345, 5)        # no such process: False, no exception
+
+
+def _report_niceness(conn):
+    conn.send(thread_niceness())
+
+
+def test_bad_niceness_is_named():
+    with pytest.raises(ConfigError, match="niceness"):
+        set_thread_niceness(25)
+
+
+@pytest.mark.parametrize("process", [True, False])
+def test_loop_worker_runs_niced_and_finishes_at_normal_priority(process):
+    from canopy.loop.closer import LoopCloser
+    from canopy.loop.params import LoopParams
+    from canopy.loop.worker import LoopWorker
+    from shared.types import StereoCalibration
+
+    calib = StereoCalibration(fx=450.0, fy=450.0, cx=376.0, cy=240.0, baseline=0.11, width=752, height=480)
+    main = thread_niceness()
+    worker = LoopWorker(LoopCloser(calib, LoopParams(), None), None, niceness=19, process=process)
+    worker.start()
+    try:
+        first = worker.outbox.get(timeout=30)   # the worker has started (and reniced itself)
+        assert first == ("extra", {"worker_niceness": 19, "worker_process": process})
+        assert thread_niceness(worker.thread_id) == 19 and thread_niceness() == main
+        worker.finish()
+        items = [worker.outbox.get(timeout=10)]
+        while items[-1][0] != "done":
+            items.append(worker.outbox.get(timeout=10))
+        extra = {k: v for kind, *rest in items if kind == "extra" for k, v in rest[0].items()}
+        # the end of the stream is not slowed (where this process may raise a thread's priority again)
+        assert extra["worker_niceness_at_end"] == (0 if _may_raise_priority() else 19)
+    finally:
+        worker.stop()
+    assert not worker.alive()
+
+
+def test_renicing_a_process_tree_reaches_its_threads_and_children():
+    import multiprocessing
+
+    from canopy.loop.priority import set_tree_niceness
+
+    mp = multiprocessing.get_context("fork")
+    parent, child = mp.Pipe(duplex=False)
+    go = mp.Event()
+    p = mp.Process(target=_tree, args=(child, go))
+    p.start()
+    try:
+        pids = parent.recv()                      # (its own thread, its child process), both at 19
+        assert all(thread_niceness(t) == 19 for t in pids)
+        assert set_tree_niceness(p.pid, 3) >= 2
+        assert all(thread_niceness(t) == 3 for t in pids)
+    finally:
+        go.set()
+        p.join(10)
+
+
+def _tree(conn, go):
+    import multiprocessing
+    set_thread_niceness(19)
+    c = multiprocessing.get_context("fork").Process(target=go.wait, args=(10,))
+    c.start()
+    conn.send((threading.get_native_id(), c.pid))
+    go.wait(10)
+    c.join(10)
+
+
+def _may_raise_priority() -> bool:
+    box = {}
+
+    def probe():
+        set_thread_niceness(19)
+        box["ok"] = set_thread_niceness(0)
+
+    t = threading.Thread(target=probe)
+    t.start()
+    t.join()
+    return box["ok"]
