@@ -200,6 +200,25 @@ def test_euroc_source_reads_generated_sequence(seq):
     assert img.stat().st_mtime_ns == mtime
 
 
+def test_two_callers_of_one_sequence_render_it_once(tmp_path):
+    """A second caller waits for the first (folder lock) and reuses its frames; without the lock
+    it took the half-written folder for a stale one, deleted it and rendered again."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    out = tmp_path / "shared"
+    with ThreadPoolExecutor(2) as pool:
+        jobs = [pool.submit(generate_sequence, "day-loop", out, n_frames=4, seed=SEED, workers=1, **OPTS)
+                for _ in range(2)]
+        paths = [j.result() for j in jobs]
+    assert paths == [out, out]
+    src = open_source("euroc", out)
+    left = sorted((out / "mav0" / "cam0" / "data").iterdir())
+    assert len(src) == 4 and len(left) == 4
+    # rendered once: every frame was written before the first caller returned, none after
+    stamp_time = (out / "params.json").stat().st_mtime_ns
+    assert all(p.stat().st_mtime_ns <= stamp_time for p in left)
+
+
 def test_deterministic_from_seed(seq):
     path, src, gen = seq
     again = SequenceGenerator(resolve_params("day-loop", N_FRAMES, **OPTS), SEED)

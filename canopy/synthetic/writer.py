@@ -12,6 +12,7 @@ identity and the ground truth is directly ``T_world_cam`` of the left camera.
 """
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import shutil
@@ -224,6 +225,20 @@ def generate_sequence(preset: str, out_dir: str | Path, n_frames: int | None = N
     stamp = _stamp(preset, seed, params)
     if _is_complete(out, stamp):
         return out
+    # Two processes asking for the same sequence (a benchmark and a launch, say) must not both
+    # render into one folder: the second would take the first's half-written folder for a stale
+    # one and delete it. The second waits for the first and then reuses its output.
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with open(out.parent / f".{out.name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if _is_complete(out, stamp):
+            return out
+        return _render_sequence(params, seed, stamp, out, workers, progress)
+
+
+def _render_sequence(params: SyntheticParams, seed: int, stamp: dict, out: Path, workers: int | None,
+                     progress: Callable[[int, int], None] | None) -> Path:
+    """Render every frame of ``params`` into ``out`` (called with the folder's lock held)."""
     if out.exists():
         if not out.is_dir():
             raise InputError(out, "output path exists and is not a folder")
