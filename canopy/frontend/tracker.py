@@ -25,7 +25,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from canopy.frontend.features import Features, OrbExtractor
+from canopy.frontend.cell_extractor import make_extractor
+from canopy.frontend.features import Features
 from canopy.frontend.keypoint_centres import centre_keypoints
 from canopy.frontend.keyframe_policy import entropy_ratio, keyframe_reasons
 from canopy.frontend.geometry import (differential_entropy, pose_information, se3_inv, stereo_pose_jacobian,
@@ -72,9 +73,9 @@ class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, Tra
                  initial_pose: np.ndarray | None = None):
         self.calib = calib
         self.params = (params or TrackingParams()).validate()
-        self.extractor = OrbExtractor(self.params)
+        self.extractor = make_extractor(self.params)  # tracking.extractor: opencv | cells
         # cv2.ORB objects are not thread-safe: the right image gets its own extractor.
-        self.extractor_right = OrbExtractor(self.params)
+        self.extractor_right = make_extractor(self.params)
         self._pool = ThreadPoolExecutor(max_workers=1) if self.params.parallel_extraction else None
         self.scale_factors = self.params.scale_factor ** np.arange(self.params.n_levels)
         self.K = calib.K
