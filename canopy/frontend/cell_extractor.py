@@ -12,8 +12,8 @@ empties the low-contrast parts of the image.
 How it is done here (vectorised; no per-keypoint Python except setting the angles):
 
 * FAST with non-maximum suppression once per level at the high threshold; cells left empty are
-  found by ``np.bincount``; FAST at the fallback threshold runs only on views of the empty cells,
-  one call per horizontal run of empty cells in a cell row (views carry FAST's 3 px border).
+  found by ``np.bincount``; FAST at the fallback threshold runs on views spanning the empty cells
+  of each cell row (with FAST's 3 px border; corners in that row's other cells are dropped).
   FAST's score (the largest threshold at which a pixel is still a corner) does not depend on the
   threshold, so a whole-level FAST followed by per-cell selection equals ORB-SLAM's per-cell
   calls up to non-maximum suppression across cell borders.
@@ -91,9 +91,18 @@ def _circle_offsets() -> tuple[np.ndarray, np.ndarray]:
 
 
 _CU, _CV = _circle_offsets()
-_CU_F, _CV_F = _CU.astype(np.float32), _CV.astype(np.float32)
+_MASK_U = np.zeros((2 * HALF_PATCH + 1,) * 2, np.float32)  # u (resp. v) inside the circle, 0 outside
+_MASK_V = np.zeros_like(_MASK_U)
+_MASK_U[_CV + HALF_PATCH, _CU + HALF_PATCH] = _CU
+_MASK_V[_CV + HALF_PATCH, _CU + HALF_PATCH] = _CV
 _HB = HARRIS_BLOCK // 2 + 1                      # patch half size incl. the Sobel border
-_HD = np.arange(-_HB, _HB + 1)
+
+
+def _patches(img: np.ndarray, x: np.ndarray, y: np.ndarray, half: int) -> np.ndarray:
+    """(K, 2 half + 1, 2 half + 1) float32 patches centred on (x, y): whole patch rows are copied
+    from a sliding-window view (2.5x faster than gathering every pixel by a flat index)."""
+    n = 2 * half + 1
+    return np.lib.stride_tricks.sliding_window_view(img, (n, n))[y - half, x - half].astype(np.float32)
 
 
 def harris_responses(img: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -102,11 +111,11 @@ def harris_responses(img: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarra
     product: small BLAS calls spawn OpenBLAS threads, which cost more than they save here.)"""
     if len(x) == 0:
         return np.zeros(0, np.float32)
-    w = img.shape[1]
-    off = (_HD[:, None] * w + _HD[None, :]).ravel()
-    p = img.ravel()[(y * w + x)[:, None] + off[None, :]].astype(np.float32).reshape(-1, 2 * _HB + 1, 2 * _HB + 1)
-    dx = (p[:, :-2, 2:] - p[:, :-2, :-2]) + 2 * (p[:, 1:-1, 2:] - p[:, 1:-1, :-2]) + (p[:, 2:, 2:] - p[:, 2:, :-2])
-    dy = (p[:, 2:, :-2] - p[:, :-2, :-2]) + 2 * (p[:, 2:, 1:-1] - p[:, :-2, 1:-1]) + (p[:, 2:, 2:] - p[:, :-2, 2:])
+    p = _patches(img, x, y, _HB)
+    d = p[:, :, 2:] - p[:, :, :-2]                     # Sobel = central difference, then [1 2 1]
+    dx = d[:, :-2] + 2 * d[:, 1:-1] + d[:, 2:]
+    d = p[:, 2:] - p[:, :-2]
+    dy = d[:, :, :-2] + 2 * d[:, :, 1:-1] + d[:, :, 2:]
     a = np.einsum("kij,kij->k", dx, dx)
     b = np.einsum("kij,kij->k", dy, dy)
     c = np.einsum("kij,kij->k", dx, dy)
@@ -119,10 +128,9 @@ def ic_angles(img: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     radius 15 (Rosin 1999; ORB / ORB-SLAM's IC_Angle). Pixels at least 15 px inside the image."""
     if len(x) == 0:
         return np.zeros(0, np.float32)
-    w = img.shape[1]
-    vals = img.ravel()[(y * w + x)[:, None] + (_CV * w + _CU)[None, :]].astype(np.float32)
-    m10 = np.einsum("ki,i->k", vals, _CU_F)  # einsum, not @: no OpenBLAS threads for a small product
-    m01 = np.einsum("ki,i->k", vals, _CV_F)
+    p = _patches(img, x, y, HALF_PATCH)
+    m10 = np.einsum("kij,ij->k", p, _MASK_U)  # einsum, not @: no OpenBLAS threads for a small product
+    m01 = np.einsum("kij,ij->k", p, _MASK_V)
     return np.mod(np.degrees(np.arctan2(m01, m10)), 360.0).astype(np.float32)
 
 
@@ -241,18 +249,19 @@ class CellExtractor:
             empty = (np.bincount(cell, minlength=nrow * ncol) == 0).reshape(nrow, ncol)
             if empty.any():
                 self._fast.setThreshold(int(low))
-                # runs of empty cells along each cell row: one FAST call per run, on a view with
-                # FAST's border (ORB-SLAM: one call per cell, cells overlapping by that border)
-                pad = np.zeros((nrow, 1), bool)
-                edges = np.diff(np.hstack([pad, empty, pad]).astype(np.int8), axis=1)
-                starts, ends = np.nonzero(edges == 1), np.nonzero(edges == -1)
-                for r, c0, c1 in zip(starts[0], starts[1], ends[1]):  # both row-major: paired in order
+                # one FAST call per cell row, on a view from its first to its last empty cell with
+                # FAST's border (ORB-SLAM: one call per cell, cells overlapping by that border);
+                # corners that fall in the row's non-empty cells are dropped
+                for r in np.flatnonzero(empty.any(axis=1)):
+                    cols = np.flatnonzero(empty[r])
                     ya, yb = y0 + r * ch, (y0 + (r + 1) * ch if r < nrow - 1 else y1)
-                    xa, xb = x0 + c0 * cw, (x0 + c1 * cw if c1 < ncol else x1)
+                    xa, xb = x0 + cols[0] * cw, (x0 + (cols[-1] + 1) * cw if cols[-1] < ncol - 1 else x1)
                     q, sq = _fast_points(self._fast, img[ya - FAST_BORDER:yb + FAST_BORDER,
                                                          xa - FAST_BORDER:xb + FAST_BORDER],
                                          xa - FAST_BORDER, ya - FAST_BORDER)
                     ok = (q[:, 0] >= xa) & (q[:, 0] < xb) & (q[:, 1] >= ya) & (q[:, 1] < yb)
+                    q, sq = q[ok], sq[ok]
+                    ok = empty[r, np.minimum((q[:, 0] - x0) // cw, ncol - 1)]
                     pts_all.append(q[ok])
                     scores.append(sq[ok])
         pts = np.concatenate(pts_all)
