@@ -209,12 +209,13 @@ class CellExtractor:
         self.last_stats: dict = {}
 
     def pyramid(self, image: np.ndarray) -> list[np.ndarray]:
-        """Levels by cv2.resize of the previous level to round(size / scale^l) (cv2.ORB's sizes)."""
+        """Levels by cv2.resize of the previous level to round(size / scale^l), bit-exact
+        interpolation: cv2.ORB's own pyramid, so descriptors equal cv2.ORB's on the same keypoints."""
         h, w = image.shape
         levels = [image]
         for s in self.scale_factors[1:]:
             levels.append(cv2.resize(levels[-1], (int(round(w / s)), int(round(h / s))),
-                                     interpolation=cv2.INTER_LINEAR))
+                                     interpolation=cv2.INTER_LINEAR_EXACT))
         return levels
 
     def fallback_for(self, image: np.ndarray, fallback_threshold: int | None) -> tuple[int, float | None]:
@@ -292,10 +293,20 @@ class CellExtractor:
             # strongest Harris responses of those (cv2.ORB's ranking of its 2x FAST retention) fill
             # the quota. A second quadtree on Harris instead keeps weaker corners in empty areas:
             # 20 % fewer stereo matches on KITTI 06 (docs/notes/s6-cells.md)
-            sel = quadtree_select(x.astype(np.float64), y.astype(np.float64), fast_score, rx, ry, rw, rh, 2 * quota)
-            harris = harris_responses(level, x[sel], y[sel])
-            keep = np.sort(np.argsort(-harris, kind="stable")[:quota])
-            sel, harris = sel[keep], harris[keep]
+            xf, yf = x.astype(np.float64), y.astype(np.float64)
+            rank = self.params.cell_ranking
+            if rank == "harris2x":
+                sel = quadtree_select(xf, yf, fast_score, rx, ry, rw, rh, 2 * quota)
+                harris = harris_responses(level, x[sel], y[sel])
+                keep = np.sort(np.argsort(-harris, kind="stable")[:quota])
+                sel, harris = sel[keep], harris[keep]
+            elif rank == "fast":  # ORB-SLAM as is: the best FAST score per node
+                sel = quadtree_select(xf, yf, fast_score, rx, ry, rw, rh, quota)
+                harris = harris_responses(level, x[sel], y[sel])
+            else:  # "harris": the best Harris response per node
+                harris = harris_responses(level, x, y)
+                sel = quadtree_select(xf, yf, harris, rx, ry, rw, rh, quota)
+                harris = harris[sel]
             x, y = x[sel], y[sel]
             angles = ic_angles(level, x, y)
             kps = cv2.KeyPoint_convert(np.column_stack([x, y]).astype(np.float32), float(self.params.patch_size),

@@ -47,6 +47,10 @@ class TrackingParams:
     # ... but never below this many sigmas of the image's noise (track_health.image_noise_sigma,
     # measured when fast_noise_factor > 0), so that the fallback does not pick up noise
     cell_fallback_noise_factor: float = 2.0
+    # which corner of a quadtree node is kept: "harris2x" (quadtree to twice the quota on FAST
+    # scores, the quota's strongest Harris responses of those, as cv2.ORB ranks), "fast" (ORB-SLAM:
+    # best FAST score per node), "harris" (best Harris response per node)
+    cell_ranking: str = "harris2x"
 
     # --- stereo matching on rectified rows (AGRI §3.2.2; ORB-SLAM2 ComputeStereoMatches)
     stereo_max_hamming: int = 75        # (TH_HIGH + TH_LOW) / 2 of ORB-SLAM2
@@ -187,6 +191,7 @@ class TrackingParams:
         need(self.extractor in EXTRACTORS, "extractor", f"must be one of {EXTRACTORS}")
         need(self.extractor_enhanced in EXTRACTORS, "extractor_enhanced", f"must be one of {EXTRACTORS}")
         need(self.cell_size >= 8, "cell_size", "must be >= 8 px")
+        need(self.cell_ranking in ("harris2x", "fast", "harris"), "cell_ranking", "must be harris2x, fast or harris")
         need(0 < self.fast_fallback_threshold < 255, "fast_fallback_threshold", "must be in (0, 255)")
         need(self.cell_fallback_noise_factor >= 0, "cell_fallback_noise_factor", "must be >= 0")
         need(self.grid_cols > 0 and self.grid_rows > 0, "grid_cols", "and grid_rows must be > 0")
