@@ -199,3 +199,20 @@ def test_extractor_setting_is_validated_and_chooses_the_class():
         TrackingParams(extractor="sift")
     with pytest.raises(ConfigError, match="extractor_enhanced"):
         TrackingParams(extractor_enhanced="cell")
+
+
+def test_descriptors_equal_cv2_orbs_on_its_own_keypoints(kitti_pair, kitti_params):
+    """Our pyramid is cv2.ORB's (bit-exact resize of the previous level) and compute keeps the
+    given angle: on cv2.ORB's level-0 and level-1 keypoints the descriptors are identical."""
+    left, _, _ = kitti_pair
+    ex = CellExtractor(replace(kitti_params, extractor="cells"))
+    orb = cv2.ORB_create(2000, 1.2, 8, 19, 0, 2, cv2.ORB_HARRIS_SCORE, 31, 20)
+    kps, desc = orb.detectAndCompute(left, None)
+    pyr = ex.pyramid(left)
+    for lvl in (0, 1):
+        idx = [i for i, k in enumerate(kps) if k.octave == lvl][:200]
+        s = 1.2 ** lvl
+        ours = [cv2.KeyPoint(kps[i].pt[0] / s, kps[i].pt[1] / s, 31, kps[i].angle, 1.0, 0, i) for i in idx]
+        out, d = ex._orb.compute(pyr[lvl], ours)
+        assert [k.class_id for k in out] == idx
+        np.testing.assert_array_equal(d, desc[idx])
