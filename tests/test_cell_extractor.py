@@ -146,12 +146,15 @@ def test_quadtree_select_spreads_to_the_quota():
     assert len(quadtree_select(x[:10], y[:10], score[:10], 0, 0, 400, 200, 60)) == 10
 
 
-def test_cell_descriptors_stereo_match_as_many_as_opencv(kitti_params):
-    """Measured on the 11 pairs 0, 5, ..., 50: 7208 stereo matches against cv2.ORB's 7355 (-2 %; pair 0:
-    739 each), although the cells extractor puts corners where cv2.ORB has none (low-texture road
-    and sky, where stereo is ambiguous): the descriptors on our pyramid with our angles match."""
+@pytest.mark.parametrize("ranking, share", [("harris2x", 0.95), ("fast", 0.8)])
+def test_cell_descriptors_stereo_match_about_as_many_as_opencv(kitti_params, ranking, share):
+    """Stereo matches on KITTI pairs 0, 20, 40 against cv2.ORB + grid bucketing. Measured:
+    ``harris2x`` 98 % over the 11 pairs 0, 5, ..., 50 (7208 vs 7355; pair 0: 739 each), so the
+    descriptors on our pyramid with our angles match as cv2.ORB's do; ``fast`` (the default, ORB-SLAM's
+    choice) 85 % on these three (1731 vs 2039): it keeps FAST-strongest corners in low-texture road
+    and sky cells where stereo is ambiguous -- and still tracks better (docs/notes/s6-cells.md)."""
     src = open_source("kitti")
-    pc = replace(kitti_params, extractor="cells")
+    pc = replace(kitti_params, extractor="cells", cell_ranking=ranking)
     n_cells = n_cv = 0
     for i in (0, 20, 40):
         f = src.frame(i)
@@ -160,7 +163,7 @@ def test_cell_descriptors_stereo_match_as_many_as_opencv(kitti_params):
         cv = match_stereo(OrbExtractor(kitti_params).extract(f.left), OrbExtractor(kitti_params).extract(f.right),
                           f.left, f.right, src.calibration, kitti_params)
         n_cells, n_cv = n_cells + int(cells.valid.sum()), n_cv + int(cv.valid.sum())
-    assert n_cells >= 0.95 * n_cv, (n_cells, n_cv)
+    assert n_cells >= share * n_cv, (n_cells, n_cv)
 
 
 def test_disparity_offset_follows_the_extractor_that_found_the_keypoints(kitti_pair, kitti_params):
