@@ -40,9 +40,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from canopy.config import parse_setting  # noqa: E402
+from canopy.config import load_run_config, parse_setting, with_settings  # noqa: E402
 from canopy.degrade import GRID_BETAS, GRID_GAINS, NOISE_LEVELS, grid_cells  # noqa: E402
 from canopy.report import write_json  # noqa: E402
+from shared.errors import ConfigError  # noqa: E402
 from canopy.sources import BUNDLED_DATA  # noqa: E402
 from tools.degrade_sequence import degrade_sequence  # noqa: E402
 
@@ -316,6 +317,11 @@ def main(argv=None) -> int:
     for section, field, _ in settings:
         if section not in ("tracking", "enhancement"):
             raise SystemExit(f"bench_degrade_grid: --set {section}.{field}: only tracking.* and enhancement.* settings")
+    if settings:  # unknown fields and bad values fail here, named, before any run
+        try:
+            with_settings(load_run_config("kitti"), settings)
+        except ConfigError as exc:
+            raise SystemExit(f"bench_degrade_grid: --set {exc}") from None
     if args.merge:
         return merge(args.merge, Path(args.out_dir))
 
