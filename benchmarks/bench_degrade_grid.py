@@ -40,8 +40,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from canopy.config import load_run_config, parse_setting, with_settings  # noqa: E402
 from canopy.degrade import GRID_BETAS, GRID_GAINS, NOISE_LEVELS, grid_cells  # noqa: E402
 from canopy.report import write_json  # noqa: E402
+from shared.errors import ConfigError  # noqa: E402
 from canopy.sources import BUNDLED_DATA  # noqa: E402
 from tools.degrade_sequence import degrade_sequence  # noqa: E402
 
@@ -74,7 +76,8 @@ def sequence_path(dataset: str, cache: Path) -> tuple[str, Path]:
     return dataset, BUNDLED_DATA[dataset]
 
 
-def run_canopy_in_process(dataset: str, path: Path, clean_path: Path, method: str, max_frames) -> dict:
+def run_canopy_in_process(dataset: str, path: Path, clean_path: Path, method: str, max_frames,
+                          settings=()) -> dict:
     """Tracking + local mapping in one process (``benchmarks/bench_enhance_diagnose.run``: the actors'
     enhancement and FAST rules, no loop closing, no frame can be dropped); tracked % counts
     frames with a tracked pose (``ok`` / ``init``, not ``predicted`` or ``lost``) of all frames,
@@ -83,7 +86,9 @@ def run_canopy_in_process(dataset: str, path: Path, clean_path: Path, method: st
 
     start = time.perf_counter()
     config, kind = ("synthetic", "euroc") if dataset in PRESETS else (dataset, dataset)
-    out, rows = run(path, clean_path, config, {"method": method}, {}, max_frames, stereo=False, kind=kind)
+    enh_sets = {"method": method, **{f: v for s, f, v in settings if s == "enhancement"}}
+    track_sets = {f: v for s, f, v in settings if s == "tracking"}
+    out, rows = run(path, clean_path, config, enh_sets, track_sets, max_frames, stereo=False, kind=kind)
     decisions: dict[str, int] = {}
     for r in rows:
         decisions[r["method"]] = decisions.get(r["method"], 0) + 1
@@ -92,8 +97,11 @@ def run_canopy_in_process(dataset: str, path: Path, clean_path: Path, method: st
             "wall_s": time.perf_counter() - start, "runner": "in-process"}
 
 
-def run_canopy(dataset: str, path: Path, method: str, max_frames, workdir: Path) -> dict:
+def run_canopy(dataset: str, path: Path, method: str, max_frames, workdir: Path, settings=()) -> dict:
     from canopy.app import run_slam
+
+    if settings:
+        raise SystemExit("bench_degrade_grid: --set needs --in-process (the actors read the config file)")
 
     start = time.perf_counter()
     run_dataset = "synthetic" if dataset in PRESETS else dataset
@@ -295,6 +303,9 @@ def main(argv=None) -> int:
                     help="Canopy runs as tracking + local mapping in this process (no actors, no loop closing): "
                          "on a machine too loaded for the actors' timeouts")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--set", dest="settings", action="append", default=[], metavar="SECTION.FIELD=VALUE",
+                    help="override a tracking / enhancement setting of the dataset's config for Canopy's runs "
+                         "(with --in-process; repeatable), e.g. --set tracking.extractor=opencv")
     ap.add_argument("--cells-cache", default=None, metavar="DIR",
                     help="keep the degraded copies in DIR and reuse them (e.g. $CANOPY_CACHE_DIR/degraded)")
     ap.add_argument("--out-dir", default=str(ROOT / "docs" / "results"))
@@ -302,6 +313,15 @@ def main(argv=None) -> int:
                     help="run nothing: combine the rows of these bench_degrade_grid.json files (e.g. one run per "
                          "dataset) into one JSON, table and heat maps in --out-dir")
     args = ap.parse_args(argv)
+    settings = [parse_setting(text) for text in args.settings]
+    for section, field, _ in settings:
+        if section not in ("tracking", "enhancement"):
+            raise SystemExit(f"bench_degrade_grid: --set {section}.{field}: only tracking.* and enhancement.* settings")
+    if settings:  # unknown fields and bad values fail here, named, before any run
+        try:
+            with_settings(load_run_config("kitti"), settings)
+        except ConfigError as exc:
+            raise SystemExit(f"bench_degrade_grid: --set {exc}") from None
     if args.merge:
         return merge(args.merge, Path(args.out_dir))
 
@@ -334,8 +354,8 @@ def main(argv=None) -> int:
                     label = cell.label
                     path, temporary = degraded_cell(kind, d, clean_path, cell, max_frames, tmp, cells_cache)
                 for m in args.methods:
-                    r = run_canopy_in_process(d, path, clean_path, m, max_frames) if args.in_process else \
-                        run_canopy(d, path, m, max_frames, tmp / f"{d}_{label}")
+                    r = run_canopy_in_process(d, path, clean_path, m, max_frames, settings) if args.in_process else \
+                        run_canopy(d, path, m, max_frames, tmp / f"{d}_{label}", settings)
                     r.update({"dataset": d, "cell": label, "method": m,
                               "gain": None if cell is None else cell.effective_gain,
                               "beta": None if cell is None else (cell.beta if cell.haze else 0.0),
@@ -387,7 +407,7 @@ def main(argv=None) -> int:
             print(line)
     shown = list(args.methods) + ([f"orbslam3-{k}" for k in args.peers] if orb is not None else [])
     result = {"benchmark": "bench_degrade_grid", "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-              "quick": args.quick, "datasets": list(datasets), "gains": list(gains), "betas": list(betas),
+              "quick": args.quick, "settings": list(args.settings), "datasets": list(datasets), "gains": list(gains), "betas": list(betas),
               "noise_levels": {n: {"full_well": NOISE_LEVELS[n][0], "read_noise": NOISE_LEVELS[n][1]} for n in noise},
               "methods": list(args.methods), "orbslam3": {"available": orb is not None, "message": peer_msg},
               "criteria": {"ate_factor": ATE_FACTOR, "checks": checks}, "rows": rows}

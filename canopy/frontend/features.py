@@ -23,6 +23,8 @@ class Features:
     octave: np.ndarray       # (N,) int32 pyramid level
     response: np.ndarray     # (N,) float32
     descriptors: np.ndarray  # (N,32) uint8
+    # which extractor found them ("opencv" | "cells"): the stereo disparity offset depends on it
+    extractor: str = "opencv"
 
     def __len__(self) -> int:
         return len(self.uv)
@@ -33,7 +35,7 @@ class Features:
                         np.zeros(0, np.float32), np.zeros((0, 32), np.uint8))
 
     def subset(self, idx: np.ndarray) -> "Features":
-        return Features(self.uv[idx], self.octave[idx], self.response[idx], self.descriptors[idx])
+        return Features(self.uv[idx], self.octave[idx], self.response[idx], self.descriptors[idx], self.extractor)
 
 
 def grid_select(uv: np.ndarray, response: np.ndarray, width: int, height: int,

@@ -45,7 +45,7 @@ def centre_keypoints(feats: Features, stereo: StereoMatches | None, scale_factor
     uv = np.empty_like(feats.uv)
     uv[:, 0] = ax[o] * feats.uv[:, 0] + bx[o]
     uv[:, 1] = ay[o] * feats.uv[:, 1] + by[o]
-    out = Features(uv, feats.octave, feats.response, feats.descriptors)
+    out = Features(uv, feats.octave, feats.response, feats.descriptors, feats.extractor)
     if stereo is None:
         return out, None
     ur = np.where(stereo.valid, ax[o] * stereo.u_right + bx[o], stereo.u_right).astype(np.float32)

@@ -11,6 +11,9 @@ from dataclasses import dataclass
 from shared.errors import ConfigError
 
 
+EXTRACTORS = ("opencv", "cells")  # TrackingParams.extractor / extractor_enhanced
+
+
 @dataclass(frozen=True)
 class TrackingParams:
     # --- ORB extraction (AGRI §3.2.1; ORB-SLAM2 ORBextractor defaults) -------------
@@ -36,6 +39,25 @@ class TrackingParams:
     # OpenCV reports a level-L keypoint at x_L * s, the pyramid (cv2.resize) puts it at
     # (x_L + 0.5) s - 0.5: shift keypoints by 0.5 (s - 1) px (canopy.frontend.keypoint_centres)
     centre_level_keypoints: bool = False
+    # Which extractor: "opencv" (cv2.ORB, one FAST threshold, Harris ranking, grid bucketing above)
+    # or "cells" (canopy.frontend.cell_extractor: ORB-SLAM's ORBextractor -- FAST per ~cell_size px
+    # cell at fast_threshold, again at fast_fallback_threshold in cells that found none, quadtree
+    # distribution to per-level quotas; keeps low-contrast corners that one threshold loses).
+    extractor: str = "opencv"
+    # Frames the enhancement changed (the AFE FAST rule is passed: its own adaptive threshold and
+    # Eq. 19 fallback) use this extractor: "opencv" or "cells".
+    extractor_enhanced: str = "opencv"
+    cell_size: int = 30                 # px (ORB-SLAM's W = 30)
+    fast_fallback_threshold: int = 7    # ORB-SLAM's minThFAST, in cells where fast_threshold finds none
+    # ... but never below this many sigmas of the image's noise (track_health.image_noise_sigma,
+    # measured when fast_noise_factor > 0), so that the fallback does not pick up noise
+    cell_fallback_noise_factor: float = 2.0
+    # which corner of a quadtree node is kept: "fast" (ORB-SLAM: best FAST score per node),
+    # "harris" (best Harris response per node), "harris2x" (quadtree to twice the quota on FAST
+    # scores, the quota's strongest Harris responses of those, as cv2.ORB ranks). On KITTI 06 with
+    # haze beta 0.06 and the noisy sensor: fast 100 % tracked, harris 98 %, harris2x 96 % and
+    # 74 % (docs/notes/s6-cells.md)
+    cell_ranking: str = "fast"
 
     # --- stereo matching on rectified rows (AGRI §3.2.2; ORB-SLAM2 ComputeStereoMatches)
     stereo_max_hamming: int = 75        # (TH_HIGH + TH_LOW) / 2 of ORB-SLAM2
@@ -60,6 +82,9 @@ class TrackingParams:
     # (a right principal point off by a fraction of a pixel). Measure it without ground truth with
     # benchmarks/calibrate_disparity_offset.py (canopy.frontend.disparity_offset).
     disparity_offset_px: float = 0.0
+    # ... the same for keypoints of the "cells" extractor (its own sub-pixel localisation; the
+    # offset is chosen per frame by the extractor that found the left keypoints, Features.extractor)
+    disparity_offset_cells_px: float = 0.0
 
     # --- temporal matching against the local map -----------------------------------
     # Stage 1 (ORB-SLAM TrackWithMotionModel): project the local map with the constant-velocity
@@ -157,6 +182,10 @@ class TrackingParams:
     line_max_depth_baselines: float = 60.0  # new map lines: both endpoints closer than this
     line_weight_in_count: int = 1       # a line inlier counts as this many point inliers
 
+    def disparity_offset_for(self, extractor: str) -> float:
+        """The calibrated disparity offset for keypoints found by ``extractor`` (Features.extractor)."""
+        return self.disparity_offset_cells_px if extractor == "cells" else self.disparity_offset_px
+
     def validate(self) -> "TrackingParams":
         def need(ok: bool, name: str, what: str) -> None:
             if not ok:
@@ -166,6 +195,12 @@ class TrackingParams:
         need(self.scale_factor > 1.0, "scale_factor", "must be > 1")
         need(1 <= self.n_levels <= 16, "n_levels", "must be in [1, 16]")
         need(0 < self.fast_threshold < 255, "fast_threshold", "must be in (0, 255)")
+        need(self.extractor in EXTRACTORS, "extractor", f"must be one of {EXTRACTORS}")
+        need(self.extractor_enhanced in EXTRACTORS, "extractor_enhanced", f"must be one of {EXTRACTORS}")
+        need(self.cell_size >= 8, "cell_size", "must be >= 8 px")
+        need(self.cell_ranking in ("harris2x", "fast", "harris"), "cell_ranking", "must be harris2x, fast or harris")
+        need(0 < self.fast_fallback_threshold < 255, "fast_fallback_threshold", "must be in (0, 255)")
+        need(self.cell_fallback_noise_factor >= 0, "cell_fallback_noise_factor", "must be >= 0")
         need(self.grid_cols > 0 and self.grid_rows > 0, "grid_cols", "and grid_rows must be > 0")
         need(self.oversample >= 1.0, "oversample", "must be >= 1")
         need(0 <= self.stereo_max_hamming <= 256, "stereo_max_hamming", "must be in [0, 256]")
@@ -179,6 +214,7 @@ class TrackingParams:
         need(0 <= self.sad_snr_low < self.sad_snr_high, "sad_snr_low", "must be >= 0 and < sad_snr_high")
         need(self.subpixel_search >= 1, "subpixel_search", "must be >= 1")
         need(abs(self.disparity_offset_px) < 5, "disparity_offset_px", "must be within +-5 px")
+        need(abs(self.disparity_offset_cells_px) < 5, "disparity_offset_cells_px", "must be within +-5 px")
         need(self.search_radius > 0, "search_radius", "must be > 0")
         need(self.search_radius_wide >= self.search_radius, "search_radius_wide", "must be >= search_radius")
         need(self.search_radius_local > 0, "search_radius_local", "must be > 0")

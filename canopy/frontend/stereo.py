@@ -6,7 +6,8 @@ distance with a ratio test to the second best; each right keypoint used once; th
 sub-pixel refinement of u_right by SAD patch correlation along the row on the keypoint's
 pyramid level with a parabola fit through the three costs around the minimum; finally
 matches whose SAD exceeds ``sad_outlier_factor`` times the median are rejected. A calibrated
-constant disparity offset (``disparity_offset_px``) is added to every disparity.
+constant disparity offset (``disparity_offset_px``, or ``disparity_offset_cells_px`` for keypoints of
+the cells extractor) is added to every disparity.
 All steps are batched numpy (candidate pairs via row bands, one loop over pyramid levels).
 """
 from __future__ import annotations
@@ -173,7 +174,7 @@ def match_stereo(left: Features, right: Features, left_img: np.ndarray, right_im
                                   params.subpixel_window, params.subpixel_search)
     li, ur, sad = li[ok], ur[ok], sad[ok]
     # the rig's constant disparity offset (canopy.frontend.disparity_offset): u_right moves with it
-    ur = ur - params.disparity_offset_px
+    ur = ur - params.disparity_offset_for(left.extractor)
     disp = left.uv[li, 0] - ur
     ok = (disp >= params.min_disparity) & (disp <= max_disp)
     li, ur, sad, disp = li[ok], ur[ok], sad[ok], disp[ok]

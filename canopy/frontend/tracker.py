@@ -29,7 +29,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from canopy.frontend.features import Features, OrbExtractor
+from canopy.frontend.cell_extractor import make_extractor
+from canopy.frontend.features import Features
 from canopy.frontend.keyframe_policy import entropy_ratio, keyframe_reasons
 from canopy.frontend.geometry import (differential_entropy, pose_information, se3_inv, stereo_pose_jacobian,
                                       transform)
@@ -65,9 +66,9 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
                  initial_pose: np.ndarray | None = None):
         self.calib = calib
         self.params = (params or TrackingParams()).validate()
-        self.extractor = OrbExtractor(self.params)
+        self.extractor = make_extractor(self.params)  # tracking.extractor: opencv | cells
         # cv2.ORB objects are not thread-safe: the right image gets its own extractor.
-        self.extractor_right = OrbExtractor(self.params)
+        self.extractor_right = make_extractor(self.params)
         self._pool = ThreadPoolExecutor(max_workers=1) if self.params.parallel_extraction else None
         # the right image's ORB and the stereo matching in that worker while this thread searches the
         # local map (canopy.frontend.tracker_worker); lines keep their own jobs in it, so not with lines
