@@ -96,6 +96,7 @@ class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, Tra
         self._lm_normal = np.zeros((0, 3))
         self._lm_max_dist = np.zeros(0)
         self._stereo_last = self._stereo_obs = None
+        self._silhouette = self._make_silhouette_detector()  # tracking.contour_* (None: off)
         self._segment_start_kf = -1
         # motion state
         self._initialised = False
@@ -198,10 +199,10 @@ class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, Tra
         return transform(T_wc, Pc)
 
     def _landmark_candidates(self, stereo: StereoMatches) -> np.ndarray:
-        return stereo.valid & (stereo.depth < self._max_depth)
+        return self._surface_stereo(stereo) & (stereo.depth < self._max_depth)
 
     def _close(self, stereo: StereoMatches) -> np.ndarray:
-        return stereo.valid & (stereo.depth < self._close_depth)
+        return self._surface_stereo(stereo) & (stereo.depth < self._close_depth)
 
     # ------------------------------------------------------------------ main entry
     def track(self, frame: StereoFrame, fast_threshold: int | None = None,
@@ -237,8 +238,12 @@ class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, Tra
         stereo = match_stereo(left, right, frame.left, frame.right, self.calib, self.params, noise_sigma)
         if self.params.centre_level_keypoints:  # OpenCV's pyramid coordinates -> pixel centres
             left, stereo = centre_keypoints(left, stereo, self.scale_factors, self.calib.width, self.calib.height)
-        self._stereo_last, self._stereo_obs = stereo, self._bearing_only_far(stereo)
         timings["stereo"] = _ms(t0)
+        if self._silhouette is not None:  # occluding-contour points: monocular (stereo_silhouette)
+            t0 = time.perf_counter()
+            stereo = self._flag_contours(frame.left, frame.right, left.uv, stereo)
+            timings["contour"] = _ms(t0)
+        self._stereo_last, self._stereo_obs = stereo, self._bearing_only_far(stereo)
         n_stereo = int(stereo.valid.sum())
 
         lines = None
