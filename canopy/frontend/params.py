@@ -97,7 +97,8 @@ class TrackingParams:
     contour_window_px: float = 3.0
     contour_ratio: float = 0.10
     contour_downscale: int = 2
-    contour_max_disparity_px: float = 96.0
+    contour_max_disparity_px: float = 64.0
+    contour_octave_scaled: bool = False  # window times scale_factor^octave (a level's SAD window)
 
     # --- motion estimation (AGRI §3.2.3: EPnP in RANSAC, then motion-only refinement)
     pnp_reprojection_error: float = 3.0  # px, RANSAC inlier threshold

@@ -37,8 +37,9 @@ class ContourParams:
     window_px: float = 3.0          # neighbourhood radius, level-0 px
     ratio: float = 0.10             # max / min disparity over the neighbourhood above 1 + ratio
     downscale: int = 2              # the dense match runs on the image shrunk by this factor
-    max_disparity_px: float = 128.0  # level-0 px; block matching searches up to this (rounded up to 16s)
+    max_disparity_px: float = 64.0  # level-0 px; block matching searches up to this (rounded up to 16s)
     block_size: int = 7             # StereoBM window at the downscaled resolution (odd, >= 5)
+    octave_scaled: bool = False     # window_px times scale^octave for pyramid-level keypoints
 
     def validate(self) -> "ContourParams":
         def need(ok: bool, name: str, what: str) -> None:
@@ -56,7 +57,7 @@ class ContourParams:
     def from_tracking(cls, p) -> "ContourParams":
         """The ``tracking.contour_*`` settings of a ``TrackingParams``."""
         return cls(window_px=p.contour_window_px, ratio=p.contour_ratio, downscale=p.contour_downscale,
-                   max_disparity_px=p.contour_max_disparity_px)
+                   max_disparity_px=p.contour_max_disparity_px, octave_scaled=p.contour_octave_scaled)
 
 
 class SilhouetteDetector:
@@ -70,9 +71,8 @@ class SilhouetteDetector:
         # StereoBM searches [0, numDisparities) at the downscaled resolution, a multiple of 16
         self.num_disparities = 16 * max(1, int(np.ceil(params.max_disparity_px / params.downscale / 16.0)))
         self._bm = cv2.StereoBM_create(numDisparities=self.num_disparities, blockSize=params.block_size)
-        r = int(np.ceil(params.window_px / params.downscale))
-        self._kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
-        self.radius = r
+        self.radius = int(np.ceil(params.window_px / params.downscale))
+        self._kernels: dict[int, np.ndarray] = {}
 
     def disparity(self, left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, int]:
         """Dense disparity (float32, downscaled px; ``_BM_INVALID`` where unmatched) and the
@@ -92,27 +92,49 @@ class SilhouetteDetector:
         d[d <= 0] = _BM_INVALID  # -1 (no match) and 0 (no measurable parallax) alike: background
         return d, self.num_disparities + self.params.block_size // 2
 
-    def flags(self, disparity: np.ndarray, first_col: int, uv: np.ndarray) -> np.ndarray:
-        """(N,) True where the keypoints (level-0 px) sit on a contour of ``disparity``."""
+    def _min_max(self, disparity: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray]:
+        """Max and min of the disparity over the disc of radius ``r`` around every pixel at once
+        (grey-scale dilation and erosion)."""
+        k = self._kernels.get(r)
+        if k is None:
+            k = self._kernels[r] = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+        return cv2.dilate(disparity, k), cv2.erode(disparity, k)
+
+    def radii(self, octave: np.ndarray | None, scale_factor: float) -> np.ndarray:
+        """Neighbourhood radius per keypoint in downscaled px: ``window_px`` at level 0, times
+        scale_factor^octave when ``octave_scaled`` (the SAD window and the ORB patch of a level-L
+        keypoint cover scale^L times as many level-0 pixels)."""
+        p = self.params
+        if octave is None or not p.octave_scaled:
+            return np.full(0 if octave is None else len(octave), self.radius, np.int64)
+        return np.ceil(p.window_px * scale_factor ** np.asarray(octave, float) / p.downscale).astype(np.int64)
+
+    def flags(self, disparity: np.ndarray, first_col: int, uv: np.ndarray, octave: np.ndarray | None = None,
+              scale_factor: float = 1.2) -> np.ndarray:
+        """(N,) True where the keypoints (level-0 px; pyramid ``octave``) sit on a contour of
+        ``disparity``."""
         n = len(uv)
         out = np.zeros(n, bool)
         if n == 0:
             return out
-        # max and min of the disparity over the neighbourhood of every pixel at once
-        dmax = cv2.dilate(disparity, self._kernel)
-        dmin = cv2.erode(disparity, self._kernel)
         s = self.params.downscale
         h, w = disparity.shape
         x = np.clip(np.round(uv[:, 0] / s).astype(np.int64), 0, w - 1)
         y = np.clip(np.round(uv[:, 1] / s).astype(np.int64), 0, h - 1)
-        hi, lo = dmax[y, x], dmin[y, x]
+        r = self.radii(octave, scale_factor) if octave is not None else np.full(n, self.radius, np.int64)
+        hi, lo = np.empty(n, np.float32), np.empty(n, np.float32)
+        for rad in np.unique(r).tolist():
+            sel = r == rad
+            dmax, dmin = self._min_max(disparity, rad)
+            hi[sel], lo[sel] = dmax[y[sel], x[sel]], dmin[y[sel], x[sel]]
         # unmatched anywhere near (lo == 0: background or occluded) or a disparity step > ratio
         step = (lo <= _BM_INVALID) | (hi > (1.0 + self.params.ratio) * lo)
         # left of first_col block matching cannot match at all: no evidence either way
-        judged = x - self.radius >= first_col
+        judged = x - r >= first_col
         out[:] = step & judged
         return out
 
-    def __call__(self, left: np.ndarray, right: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    def __call__(self, left: np.ndarray, right: np.ndarray, uv: np.ndarray, octave: np.ndarray | None = None,
+                 scale_factor: float = 1.2) -> np.ndarray:
         d, first = self.disparity(left, right)
-        return self.flags(d, first, uv)
+        return self.flags(d, first, uv, octave, scale_factor)

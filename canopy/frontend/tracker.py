@@ -241,7 +241,7 @@ class Tracker(TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, Tra
         timings["stereo"] = _ms(t0)
         if self._silhouette is not None:  # occluding-contour points: monocular (stereo_silhouette)
             t0 = time.perf_counter()
-            stereo = self._flag_contours(frame.left, frame.right, left.uv, stereo)
+            stereo = self._flag_contours(frame.left, frame.right, left, stereo)
             timings["contour"] = _ms(t0)
         self._stereo_last, self._stereo_obs = stereo, self._bearing_only_far(stereo)
         n_stereo = int(stereo.valid.sum())

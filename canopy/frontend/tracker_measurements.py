@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from canopy.frontend.features import Features
 from canopy.frontend.stereo import StereoMatches
 from canopy.frontend.stereo_silhouette import ContourParams, SilhouetteDetector
 
@@ -24,7 +25,7 @@ class TrackerMeasurementsMixin:
             return None
         return SilhouetteDetector(ContourParams.from_tracking(self.params))
 
-    def _flag_contours(self, left_img: np.ndarray, right_img: np.ndarray, uv: np.ndarray,
+    def _flag_contours(self, left_img: np.ndarray, right_img: np.ndarray, feats: Features,
                        stereo: StereoMatches) -> StereoMatches:
         """``stereo`` with ``on_contour`` set for its matched keypoints (unchanged when off)."""
         if self._silhouette is None:
@@ -32,7 +33,8 @@ class TrackerMeasurementsMixin:
         on = np.zeros(len(stereo.depth), bool)
         idx = np.flatnonzero(stereo.valid)
         if len(idx):
-            on[idx] = self._silhouette(left_img, right_img, uv[idx])
+            on[idx] = self._silhouette(left_img, right_img, feats.uv[idx].astype(np.float64), feats.octave[idx],
+                                       self.params.scale_factor)
         return StereoMatches(stereo.u_right, stereo.depth, stereo.n_candidates, on_contour=on)
 
     def _monocular_stereo(self, stereo: StereoMatches) -> np.ndarray:
