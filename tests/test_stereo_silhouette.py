@@ -129,9 +129,9 @@ def _track(params: TrackingParams, n: int = 8):
 
 
 def test_contour_points_are_monocular_and_make_no_landmarks_when_on():
-    keyframes, out, mapper = _track(TrackingParams(contour_enabled=True, **NO_SAD))
+    keyframes, out, _ = _track(TrackingParams(contour_enabled=True, **NO_SAD))
     first = keyframes[0]
-    _, left, _, depth = _scene()
+    *_, depth = _scene()
     truth = _true_contour(depth, first.uv.astype(np.float64)) & (first.depth > 0)
     assert truth.sum() >= 5
     on_rim = truth & (first.u_right < 0)                   # stereo-matched rim points lost their right column
@@ -151,8 +151,8 @@ def test_flag_off_leaves_tracking_unchanged():
     for (Ta, _, _), (Tb, _, _) in zip(out_a, out_b):
         np.testing.assert_array_equal(Ta, Tb)
     first = kf_a[0]
-    _, _, _, depth = _scene()
+    *_, depth = _scene()
     truth = _true_contour(depth, first.uv.astype(np.float64)) & (first.depth > 0)
     assert np.all(first.u_right[truth] >= 0) and np.all(first.new_landmark_ids[truth] >= 0)
-    kf_on, out_on, _ = _track(TrackingParams(contour_enabled=True, **NO_SAD))
+    kf_on, _, _ = _track(TrackingParams(contour_enabled=True, **NO_SAD))
     assert (kf_on[0].u_right < 0).sum() > (first.u_right < 0).sum()  # and on, it does change them
