@@ -29,7 +29,7 @@ from canopy.frontend.stereo_silhouette import ContourParams, SilhouetteDetector 
 from canopy.sources import open_source  # noqa: E402
 from shared.errors import InputError  # noqa: E402
 
-VARIANTS = [dict(), dict(octave_scaled=True), dict(window_px=5.0), dict(ratio=0.05)]
+VARIANTS = [dict(), dict(ratio=0.15), dict(octave_scaled=True), dict(window_px=5.0), dict(ratio=0.05)]
 
 
 def main() -> None:
