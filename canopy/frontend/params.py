@@ -115,6 +115,20 @@ class TrackingParams:
     # refinement and in local BA: their disparity (a pixel or two) fixes no translation, and a
     # sub-pixel bias would; their stereo depth only initialises the landmark. 0: no limit.
     stereo_obs_max_depth_baselines: float = 0.0
+    # Stereo points on occluding contours (trunk / crown silhouettes: the two cameras see different
+    # background behind the rim, so the "corner" is a T-junction, no 3D point) are measured as
+    # monocular in the pose refinement and local BA and create no landmark
+    # (canopy.frontend.stereo_silhouette): a dense StereoBM disparity, on the image shrunk by
+    # contour_downscale, searched to contour_max_disparity_px; a keypoint is on a contour when that
+    # disparity within contour_window_px varies by more than contour_ratio (max > (1 + ratio) min) or
+    # is unmatched there. Off by default: on for the generated orchard (configs/synthetic.yaml);
+    # KITTI got worse with it (docs/notes/s6-drift.md).
+    contour_enabled: bool = False
+    contour_window_px: float = 3.0
+    contour_ratio: float = 0.10
+    contour_downscale: int = 2
+    contour_max_disparity_px: float = 64.0
+    contour_octave_scaled: bool = False  # window times scale_factor^octave (a level's SAD window)
 
     # --- motion estimation (AGRI §3.2.3: EPnP in RANSAC, then motion-only refinement)
     pnp_reprojection_error: float = 3.0  # px, RANSAC inlier threshold
@@ -222,6 +236,10 @@ class TrackingParams:
         need(self.max_depth_baselines > 0, "max_depth_baselines", "must be > 0")
         need(self.close_depth_baselines > 0, "close_depth_baselines", "must be > 0")
         need(self.stereo_obs_max_depth_baselines >= 0, "stereo_obs_max_depth_baselines", "must be >= 0 (0: no limit)")
+        need(self.contour_window_px >= 1, "contour_window_px", "must be >= 1 px")
+        need(self.contour_ratio > 0, "contour_ratio", "must be > 0")
+        need(self.contour_downscale in (1, 2, 4), "contour_downscale", "must be 1, 2 or 4")
+        need(self.contour_max_disparity_px > 0, "contour_max_disparity_px", "must be > 0")
         need(self.pnp_reprojection_error > 0, "pnp_reprojection_error", "must be > 0")
         need(self.pnp_iterations > 0, "pnp_iterations", "must be > 0")
         need(0 < self.pnp_confidence < 1, "pnp_confidence", "must be in (0, 1)")

@@ -31,6 +31,9 @@ class StereoMatches:
     u_right: np.ndarray  # (N,) float32
     depth: np.ndarray    # (N,) float32
     n_candidates: int = 0
+    # True where the keypoint sits on an occluding contour (canopy.frontend.stereo_silhouette):
+    # its disparity is no 3D point's; None: not tested (tracking.contour_enabled off)
+    on_contour: np.ndarray | None = None
 
     @property
     def valid(self) -> np.ndarray:

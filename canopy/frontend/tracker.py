@@ -92,7 +92,9 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
         # created (indexed by id; 0 distance: unknown), for the frustum test of the local-map search
         self._lm_normal = np.zeros((0, 3))
         self._lm_max_dist = np.zeros(0)
-        self._stereo_last = self._stereo_obs = None
+        self._stereo_last = self._stereo_obs = self._stereo_raw = None
+        self._contour_inputs = None
+        self._silhouette = self._make_silhouette_detector()  # tracking.contour_* (None: off)
         self._segment_start_kf = -1
         # motion state
         self._initialised = False
@@ -164,24 +166,32 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
         return transform(T_wc, Pc)
 
     def _landmark_candidates(self, stereo: StereoMatches) -> np.ndarray:
-        return stereo.valid & (stereo.depth < self._max_depth)
+        return self._surface_stereo(stereo) & (stereo.depth < self._max_depth)
 
     def _close(self, stereo: StereoMatches) -> np.ndarray:
-        return stereo.valid & (stereo.depth < self._close_depth)
+        return self._surface_stereo(stereo) & (stereo.depth < self._close_depth)
 
     def _stereo(self, stereo: StereoMatches | StereoJob, timings: dict) -> StereoMatches:
         """The frame's stereo matches, waiting for the worker's job if they are pending (its
-        wait is the tracking thread's "stereo" stage); the first call also derives the matches
-        pose refinement sees (far points bearing only)."""
+        wait is the tracking thread's "stereo" stage); the first call also flags points on occluding
+        contours (tracking.contour_*) and derives the matches pose refinement sees (far and
+        contour points bearing only)."""
+        if stereo is self._stereo_last:  # already this frame's (contour-flagged) matches
+            return stereo
         if isinstance(stereo, StereoJob):
             t0 = _clock()
             job, stereo = stereo, stereo.result()
-            if self._stereo_last is not stereo:
+            if self._stereo_raw is not stereo:
                 _stage(timings, "stereo", t0)
                 timings.update(job.timings)
-        if self._stereo_last is not stereo:
+        if self._stereo_raw is not stereo:
+            self._stereo_raw = stereo
+            if self._silhouette is not None:  # occluding-contour points: monocular (stereo_silhouette)
+                t0 = _clock()
+                stereo = self._flag_contours(*self._contour_inputs, stereo)
+                _stage(timings, "contour", t0)
             self._stereo_last, self._stereo_obs = stereo, self._bearing_only_far(stereo)
-        return stereo
+        return self._stereo_last
 
     # ------------------------------------------------------------------ main entry
     def track(self, frame: StereoFrame, fast_threshold: int | None = None,
@@ -190,7 +200,7 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
         FAST threshold (AFE Eq. 18 / Eq. 19 when too few of ``fast_min_keypoints``)."""
         timings: dict[str, float] = {}
         t_all = t0 = _clock()
-        self._stereo_last = None
+        self._stereo_last = self._stereo_raw = None
         noise_sigma = None
         if self.params.fast_noise_factor > 0:
             # FAST threshold floor from the image noise (track_health): corners from the signal
@@ -204,6 +214,7 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
             _stage(timings, "noise_estimate", t0)
         left, stereo, line_job = self._left_and_stereo(frame, (fast_threshold, fast_fallback, fast_min_keypoints),
                                                        noise_sigma, timings)
+        self._contour_inputs = (frame.left, frame.right, left)  # for _stereo's contour test
         if not isinstance(stereo, StereoJob):
             stereo = self._stereo(stereo, timings)
         lines = None

@@ -1,36 +1,72 @@
 """What tracking measures of each landmark (a mixin of ``canopy.frontend.tracker.Tracker``):
 far stereo points as bearing-only measurements (ORB-SLAM's ThDepth role,
-``TrackingParams.stereo_obs_max_depth_baselines``) and ORB-SLAM's isInFrustum test of the
-local-map search (viewing angle and scale range, ``TrackingParams.view_max_angle_deg``).
-Uses the tracker's ``params``, ``scale_factors`` and its ``_stereo_obs_depth``,
+``TrackingParams.stereo_obs_max_depth_baselines``), stereo points on occluding contours the
+same way (``TrackingParams.contour_enabled``, ``canopy.frontend.stereo_silhouette``), and
+ORB-SLAM's isInFrustum test of the local-map search (viewing angle and scale range,
+``TrackingParams.view_max_angle_deg``).
+Uses the tracker's ``params``, ``scale_factors`` and its ``_stereo_obs_depth``, ``_silhouette``,
 ``_stereo_last`` / ``_stereo_obs``, ``_lm_normal`` / ``_lm_max_dist`` state.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from canopy.frontend.features import Features
 from canopy.frontend.stereo import StereoMatches
+from canopy.frontend.stereo_silhouette import ContourParams, SilhouetteDetector
 
 
 class TrackerMeasurementsMixin:
     """Bearing-only far points and the frustum test (see the module docstring)."""
 
+    def _make_silhouette_detector(self) -> SilhouetteDetector | None:
+        """The contour test of ``tracking.contour_*``; None when it is off."""
+        if not self.params.contour_enabled:
+            return None
+        return SilhouetteDetector(ContourParams.from_tracking(self.params))
+
+    def _flag_contours(self, left_img: np.ndarray, right_img: np.ndarray, feats: Features,
+                       stereo: StereoMatches) -> StereoMatches:
+        """``stereo`` with ``on_contour`` set for its matched keypoints (unchanged when off)."""
+        if self._silhouette is None:
+            return stereo
+        on = np.zeros(len(stereo.depth), bool)
+        idx = np.flatnonzero(stereo.valid)
+        if len(idx):
+            on[idx] = self._silhouette(left_img, right_img, feats.uv[idx].astype(np.float64), feats.octave[idx],
+                                       self.params.scale_factor)
+        return StereoMatches(stereo.u_right, stereo.depth, stereo.n_candidates, on_contour=on)
+
+    def _monocular_stereo(self, stereo: StereoMatches) -> np.ndarray:
+        """Stereo points measured bearing-only: beyond the stereo measurement depth, or on an
+        occluding contour (their disparity belongs to no 3D point)."""
+        mono = stereo.valid & (stereo.depth >= self._stereo_obs_depth)
+        if stereo.on_contour is not None:
+            mono |= stereo.on_contour
+        return mono
+
     def _bearing_only_far(self, stereo: StereoMatches) -> StereoMatches:
         """The measurements pose refinement and BA see: stereo points beyond the stereo
-        measurement depth lose their right-image column (monocular, bearing only); their depth
-        still initialises landmarks."""
-        if not np.isfinite(self._stereo_obs_depth):
+        measurement depth or on a contour lose their right-image column (monocular, bearing
+        only); the depth of far points still initialises landmarks."""
+        mono = self._monocular_stereo(stereo)
+        if not mono.any():
             return stereo
-        far = stereo.valid & (stereo.depth >= self._stereo_obs_depth)
-        if not far.any():
-            return stereo
-        return StereoMatches(np.where(far, -1.0, stereo.u_right).astype(np.float32),
-                             np.where(far, -1.0, stereo.depth).astype(np.float32), stereo.n_candidates)
+        return StereoMatches(np.where(mono, -1.0, stereo.u_right).astype(np.float32),
+                             np.where(mono, -1.0, stereo.depth).astype(np.float32), stereo.n_candidates,
+                             on_contour=stereo.on_contour)
 
     def _keyframe_u_right(self, stereo: StereoMatches) -> np.ndarray:
-        """Right-image columns for BA: -1 (monocular edge) beyond the stereo measurement depth."""
-        far = stereo.valid & (stereo.depth >= self._stereo_obs_depth)
-        return np.where(far, -1.0, stereo.u_right).astype(np.float32)
+        """Right-image columns for BA: -1 (monocular edge) beyond the stereo measurement depth
+        and on contours."""
+        return np.where(self._monocular_stereo(stereo), -1.0, stereo.u_right).astype(np.float32)
+
+    def _surface_stereo(self, stereo: StereoMatches) -> np.ndarray:
+        """Stereo points whose depth is a 3D point's: valid and not on a contour (landmark
+        candidates, close points of the keyframe condition)."""
+        if stereo.on_contour is None:
+            return stereo.valid
+        return stereo.valid & ~stereo.on_contour
 
     def _refine(self, T_cw, X, r, feats, stereo, inliers=None, line_obs=None):
         # far points as monocular measurements (see _bearing_only_far)
