@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import threading
+from pathlib import Path
 
 import pytest
 
@@ -150,3 +151,41 @@ def _may_raise_priority() -> bool:
     t.start()
     t.join()
     return box["ok"]
+
+
+def test_a_forked_helper_dies_with_its_sigkilled_parent(tmp_path):
+    """The loop worker and its full-BA child call exit_with_parent: a SIGKILLed loop-closing
+    actor must not leave them running (they would hold the launcher's pipes and a core)."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    script = tmp_path / "middle.py"
+    script.write_text(
+        "import os, sys, time\n"
+        "from canopy.loop.priority import exit_with_parent\n"
+        "parent = os.getpid()\n"
+        "pid = os.fork()\n"
+        "if pid == 0:\n"
+        "    exit_with_parent(parent)\n"
+        "    time.sleep(60)\n"
+        "    os._exit(0)\n"
+        "print(pid, flush=True)\n"
+        "time.sleep(60)\n")
+    middle = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True,
+                              cwd=str(Path(__file__).resolve().parents[1]))
+    helper = int(middle.stdout.readline())
+    time.sleep(0.3)  # the helper has called prctl
+    os.kill(middle.pid, signal.SIGKILL)
+    middle.wait(10)
+    def state() -> str:  # Z: dead, waiting for init to reap it
+        try:
+            return Path(f"/proc/{helper}/stat").read_text().rsplit(")", 1)[1].split()[0]
+        except (FileNotFoundError, ProcessLookupError):
+            return "gone"
+
+    deadline = time.monotonic() + 5.0
+    while time.monotonic() < deadline and state() not in ("gone", "Z"):
+        time.sleep(0.05)
+    assert state() in ("gone", "Z"), f"the helper outlived its parent (state {state()})"

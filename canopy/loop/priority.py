@@ -12,7 +12,9 @@ nothing and say so (their return value).
 """
 from __future__ import annotations
 
+import ctypes
 import os
+import signal
 import sys
 import threading
 
@@ -86,3 +88,25 @@ def set_tree_niceness(pid: int, niceness: int) -> int:
             except OSError:
                 pass
     return done
+
+
+PR_SET_PDEATHSIG = 1  # linux/prctl.h
+
+
+def exit_with_parent(parent_pid: int) -> None:
+    """Have the kernel SIGKILL this process when the thread that forked it dies.
+
+    The loop worker and its full-BA child are forked helpers of the loop-closing actor: when the
+    actor is SIGKILLed (or killed by the supervisor after an actor died) nothing else would stop
+    them, and a helper that lingers holds the launcher's stdout/stderr pipes open (a caller
+    waiting for them to close hangs) and a core. Polling ``getppid`` alone is too late: a helper
+    busy in a long step, or blocked flushing a queue nobody reads any more, never gets there.
+    Linux only; elsewhere nothing happens.
+    """
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    except (OSError, AttributeError):
+        return
+    if os.getppid() != parent_pid:  # the parent died before prctl took effect
+        os._exit(0)

@@ -37,7 +37,8 @@ import numpy as np
 from canopy.loop.database import FeatureStats
 from canopy.loop.full_ba import ba_worker
 from canopy.loop.keyframe import PlaceKeyframe, with_bow
-from canopy.loop.priority import set_process_niceness, set_thread_niceness, set_tree_niceness, thread_niceness
+from canopy.loop.priority import (exit_with_parent, set_process_niceness, set_thread_niceness, set_tree_niceness,
+                                  thread_niceness)
 from protocol.messages import LoopKeyframe, LoopResult
 
 BA_POLL_S = 0.2   # how often the worker looks for the full BA's answer while it runs
@@ -55,9 +56,10 @@ def place_keyframe(msg: LoopKeyframe, vocabulary) -> PlaceKeyframe:
     return with_bow(kf, vocabulary)
 
 
-def _ba_child(conn, job: dict, niceness: int) -> None:
+def _ba_child(conn, job: dict, niceness: int, parent_pid: int) -> None:
     """The full-BA child process: forked from the worker thread it starts at its nice value;
-    set again so a fork from another thread is niced too."""
+    set again so a fork from another thread is niced too. It dies with its parent."""
+    exit_with_parent(parent_pid)
     if niceness > 0:
         set_thread_niceness(niceness)
     ba_worker(conn, job)
@@ -140,6 +142,8 @@ class LoopWorker:
 
     # ------------------------------------------------------------------ worker thread / process
     def _run(self) -> None:
+        if self.process:  # a SIGKILLed actor takes its worker along (see exit_with_parent)
+            exit_with_parent(self._parent)
         self._tid = threading.get_native_id()
         if self.niceness > 0 and not self._finishing.is_set():
             set_thread_niceness(self.niceness)   # a process: its only thread; the queue's feeder inherits it
@@ -228,7 +232,7 @@ class LoopWorker:
         mp = multiprocessing.get_context("fork")
         parent, child = mp.Pipe(duplex=False)
         niceness = 0 if self._finishing.is_set() else self.niceness
-        proc = mp.Process(target=_ba_child, args=(child, job, niceness), daemon=True, name="canopy-full-ba")
+        proc = mp.Process(target=_ba_child, args=(child, job, niceness, os.getpid()), daemon=True, name="canopy-full-ba")
         proc.start()
         child.close()
         self._ba = (proc, parent, job["epoch"], time.perf_counter())
