@@ -198,15 +198,20 @@ def test_entropy_eq6_and_ratio_falls_with_distance():
 
 
 # ------------------------------------------------------------------ Tracker on rendered stereo sequences
-def render_wall(texture, T_wc, calib, wall_z=5.0, extent=6.0, right=False):
-    """Render a textured plane Z = wall_z (world) seen from the (left or right) camera."""
+def camera_rays(T_wc, calib, right=False):
+    """World origin (3,) and per-pixel ray directions (H,W,3, unit z in the camera) of the left
+    camera at ``T_wc``, or of the right one a baseline to its right."""
     T = T_wc.copy()
     if right:
         T = T @ np.array([[1, 0, 0, calib.baseline], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])
     u, v = np.meshgrid(np.arange(calib.width, dtype=np.float64), np.arange(calib.height, dtype=np.float64))
     rays = np.stack([(u - calib.cx) / calib.fx, (v - calib.cy) / calib.fy, np.ones_like(u)], axis=-1)
-    d = rays @ T[:3, :3].T
-    o = T[:3, 3]
+    return T[:3, 3], rays @ T[:3, :3].T
+
+
+def render_wall(texture, T_wc, calib, wall_z=5.0, extent=6.0, right=False):
+    """Render a textured plane Z = wall_z (world) seen from the (left or right) camera."""
+    o, d = camera_rays(T_wc, calib, right)
     s = (wall_z - o[2]) / d[..., 2]
     P = o + s[..., None] * d
     h, w = texture.shape

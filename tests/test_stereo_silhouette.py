@@ -12,7 +12,7 @@ from canopy.frontend.geometry import rotation_angle, se3_exp, se3_inv
 from canopy.frontend.stereo_silhouette import ContourParams, SilhouetteDetector
 from shared.errors import ConfigError
 from shared.types import StereoFrame
-from tests.test_frontend import CALIB, textured_image
+from tests.test_frontend import CALIB, camera_rays, textured_image
 
 # In this clean scene the stereo SAD outlier test alone rejects every rim point (a window across a
 # bright-dark step matches badly); in the orchard's crowns many pass it (docs/notes/s4-drift.md).
@@ -24,13 +24,7 @@ TOOTH = 0.1  # m: the rim has square teeth (corners ORB finds, as on a crown's o
 
 def render_board_scene(tex_board, tex_wall, T_wc, calib, right=False):
     """Image and exact depth (m, along the optical axis) of the board-in-front-of-wall scene."""
-    T = T_wc.copy()
-    if right:
-        T = T @ np.array([[1, 0, 0, calib.baseline], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])
-    u, v = np.meshgrid(np.arange(calib.width, dtype=np.float64), np.arange(calib.height, dtype=np.float64))
-    rays = np.stack([(u - calib.cx) / calib.fx, (v - calib.cy) / calib.fy, np.ones_like(u)], axis=-1)
-    d = rays @ T[:3, :3].T
-    o = T[:3, 3]
+    o, d = camera_rays(T_wc, calib, right)
 
     def hit(z, tex, extent):
         s = (z - o[2]) / d[..., 2]
