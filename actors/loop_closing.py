@@ -47,7 +47,8 @@ class LoopClosingActor(Actor):
             ctx.extra["loaded_keyframes"] = seed_loop_closer(self.closer, load_map(self.config["load_map"],
                                                                                    self.config["calib"]))
         ctx.extra.update({"loops": 0, "vocabulary": getattr(self.vocabulary, "name", "")})
-        self.worker = LoopWorker(self.closer, self.vocabulary, niceness=int(getattr(params, "niceness", 0)))
+        self.worker = LoopWorker(self.closer, self.vocabulary, niceness=int(getattr(params, "niceness", 0)),
+                                 idle=bool(getattr(params, "sched_idle", True)))
         self.worker.start()
 
     def on_message(self, msg, ctx: ActorContext) -> None:

@@ -8,8 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from canopy.loop.priority import PER_THREAD, set_process_niceness, set_thread_niceness, thread_niceness
+from canopy.loop.priority import PER_THREAD, set_process_niceness, set_thread_niceness, thread_idle, thread_niceness
 from shared.errors import ConfigError
+
+IDLE_POLICY = hasattr(os, "SCHED_IDLE")
 
 pytestmark = pytest.mark.skipif(not PER_THREAD, reason="nice values are per thread only on Linux")
 
@@ -96,8 +98,9 @@ def test_loop_worker_runs_niced_and_finishes_at_normal_priority(process):
     worker.start()
     try:
         first = worker.outbox.get(timeout=30)   # the worker has started (and reniced itself)
-        assert first == ("extra", {"worker_niceness": 19, "worker_process": process})
+        assert first == ("extra", {"worker_niceness": 19, "worker_idle": IDLE_POLICY, "worker_process": process})
         assert thread_niceness(worker.thread_id) == 19 and thread_niceness() == main
+        assert thread_idle(worker.thread_id) == IDLE_POLICY and not thread_idle()
         worker.finish()
         items = [worker.outbox.get(timeout=10)]
         while items[-1][0] != "done":
@@ -105,6 +108,7 @@ def test_loop_worker_runs_niced_and_finishes_at_normal_priority(process):
         extra = {k: v for kind, *rest in items if kind == "extra" for k, v in rest[0].items()}
         # the end of the stream is not slowed (where this process may raise a thread's priority again)
         assert extra["worker_niceness_at_end"] == (0 if _may_raise_priority() else 19)
+        assert extra["worker_idle_at_end"] is (IDLE_POLICY and not _may_raise_priority())
     finally:
         worker.stop()
     assert not worker.alive()
@@ -125,6 +129,11 @@ def test_renicing_a_process_tree_reaches_its_threads_and_children():
         assert all(thread_niceness(t) == 19 for t in pids)
         assert set_tree_niceness(p.pid, 3) >= 2
         assert all(thread_niceness(t) == 3 for t in pids)
+        if IDLE_POLICY:   # the scheduling policy goes along when asked
+            set_tree_niceness(p.pid, 19, idle=True)
+            assert all(thread_idle(t) for t in pids) and all(thread_niceness(t) == 19 for t in pids)
+            set_tree_niceness(p.pid, 3, idle=False)
+            assert not any(thread_idle(t) for t in pids) and all(thread_niceness(t) == 3 for t in pids)
     finally:
         go.set()
         p.join(10)
@@ -189,3 +198,34 @@ def test_a_forked_helper_dies_with_its_sigkilled_parent(tmp_path):
     while time.monotonic() < deadline and state() not in ("gone", "Z"):
         time.sleep(0.05)
     assert state() in ("gone", "Z"), f"the helper outlived its parent (state {state()})"
+
+
+def test_idle_policy_is_per_thread_and_inherited_by_a_fork():
+    import multiprocessing
+
+    from canopy.loop.priority import set_thread_idle
+
+    if not IDLE_POLICY:
+        pytest.skip("no SCHED_IDLE on this platform")
+    mp = multiprocessing.get_context("fork")
+    box = {}
+
+    def background():
+        box["set"] = set_thread_idle(True)
+        box["mine"] = thread_idle()
+        parent, child = mp.Pipe(duplex=False)
+        p = mp.Process(target=_report_idle, args=(child,))
+        p.start()
+        box["child"] = parent.recv()
+        p.join(10)
+
+    t = threading.Thread(target=background)
+    t.start()
+    t.join(30)
+    assert box == {"set": True, "mine": True, "child": True}
+    assert not thread_idle()                    # the caller's thread keeps SCHED_OTHER
+    assert not set_thread_idle(True, 2**22 + 12345)   # no such thread: False, no exception
+
+
+def _report_idle(conn):
+    conn.send(thread_idle())

@@ -104,6 +104,9 @@ class LoopParams:
     # are applied whenever they arrive, so it takes the cycles tracking and local mapping leave;
     # at the end of the stream it goes back to normal priority (0: no renicing)
     niceness: int = 19
+    # and under SCHED_IDLE (Linux): a tracking thread that wakes preempts it at once; with the nice
+    # value alone it waits for the worker's slice to end (canopy.loop.priority.set_thread_idle)
+    sched_idle: bool = True
     # --- relocalisation -------------------------------------------------------------------
     reloc_min_inliers: int = 30
     reloc_candidates: int = 5             # database candidates tried per frame, best score first

@@ -52,6 +52,39 @@ def set_thread_niceness(niceness: int, tid: int | None = None) -> bool:
     return True
 
 
+def thread_idle(tid: int | None = None) -> bool | None:
+    """Whether thread ``tid`` (default: the calling thread) runs under SCHED_IDLE; None where the
+    platform has no scheduling policies."""
+    if not hasattr(os, "sched_getscheduler"):
+        return None
+    try:
+        return os.sched_getscheduler(threading.get_native_id() if tid is None else int(tid)) == os.SCHED_IDLE
+    except OSError:
+        return None
+
+
+def set_thread_idle(idle: bool, tid: int | None = None) -> bool:
+    """Put one thread (default: the calling thread) under SCHED_IDLE, or back under SCHED_OTHER.
+
+    A nice value alone does not keep a background thread off tracking's cores: the kernel's fair
+    scheduler (EEVDF since Linux 6.6) protects a running task from wakeup preemption until it has
+    used its slice (RUN_TO_PARITY), whatever its weight, so each time the tracking thread or its
+    stereo worker woke onto a core the nice-19 loop worker held, it waited up to a slice (~3 ms),
+    several times per frame. A SCHED_IDLE task is preempted at once by any normal task that wakes
+    (sched(7), SCHED_IDLE; kernel/sched/fair.c, "preempt an idle entity in favor of a non-idle
+    entity"). Threads and processes it creates inherit the policy. Returns False where not
+    allowed (leaving SCHED_IDLE again needs the nice value within RLIMIT_NICE) or unsupported.
+    """
+    if not hasattr(os, "sched_setscheduler"):
+        return False
+    try:
+        os.sched_setscheduler(threading.get_native_id() if tid is None else int(tid),
+                              os.SCHED_IDLE if idle else os.SCHED_OTHER, os.sched_param(0))
+    except (PermissionError, ProcessLookupError, OSError):
+        return False
+    return True
+
+
 def set_process_niceness(pid: int, niceness: int) -> bool:
     """Set the nice value of a (single-threaded) child process, e.g. the full-BA child; False
     if not allowed or the process is gone."""
@@ -63,10 +96,11 @@ def set_process_niceness(pid: int, niceness: int) -> bool:
     return True
 
 
-def set_tree_niceness(pid: int, niceness: int) -> int:
+def set_tree_niceness(pid: int, niceness: int, idle: bool | None = None) -> int:
     """Set the nice value of every thread of process ``pid`` and of its descendants (Linux
-    /proc: ``task/<tid>/children``), e.g. the loop closer's worker process and its full-BA child.
-    Returns the number of threads set."""
+    /proc: ``task/<tid>/children``), e.g. the loop closer's worker process and its full-BA child;
+    with ``idle`` given, their scheduling policy too (SCHED_IDLE or SCHED_OTHER, see
+    ``set_thread_idle``). Returns the number of threads whose nice value was set."""
     n = _check(niceness)
     if not PER_THREAD:
         return 0
@@ -81,7 +115,11 @@ def set_tree_niceness(pid: int, niceness: int) -> int:
         except OSError:
             continue
         for t in tids:
+            if idle is False:  # SCHED_OTHER first: SCHED_IDLE ignores the nice value
+                set_thread_idle(False, t)
             done += set_thread_niceness(n, t)
+            if idle:
+                set_thread_idle(True, t)
             try:
                 with open(f"/proc/{p}/task/{t}/children") as f:
                     todo.extend(int(c) for c in f.read().split())

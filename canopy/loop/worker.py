@@ -2,8 +2,9 @@
 
 ``LoopWorker`` owns the ``LoopCloser``: keyframe messages handed over with ``submit`` are turned
 into place keyframes (bag of words), queried, verified and, on a loop, corrected by the pose
-graph, niced to ``niceness`` (19: it runs on cycles tracking and local mapping leave;
-``canopy.loop.priority``). After a loop the full bundle adjustment (AGRI §3.4.2) runs on a
+graph, niced to ``niceness`` (19) and by default under SCHED_IDLE (``idle``: a normal task that
+wakes preempts it at once, where a nice value alone lets it finish its slice first): it runs on
+cycles tracking and local mapping leave (``canopy.loop.priority``). After a loop the full bundle adjustment (AGRI §3.4.2) runs on a
 snapshot of the map in a forked child, niced alike (GTSAM holds the GIL for a whole LM step,
 seconds on a 400-keyframe map; ORB-SLAM runs its global BA in a thread of the loop closer).
 A newer loop stops a running BA and starts another.
@@ -37,7 +38,7 @@ import numpy as np
 from canopy.loop.database import FeatureStats
 from canopy.loop.full_ba import ba_worker
 from canopy.loop.keyframe import PlaceKeyframe, with_bow
-from canopy.loop.priority import (exit_with_parent, set_process_niceness, set_thread_niceness, set_tree_niceness,
+from canopy.loop.priority import (exit_with_parent, set_thread_idle, set_thread_niceness, set_tree_niceness, thread_idle,
                                   thread_niceness)
 from protocol.messages import LoopKeyframe, LoopResult
 
@@ -56,20 +57,34 @@ def place_keyframe(msg: LoopKeyframe, vocabulary) -> PlaceKeyframe:
     return with_bow(kf, vocabulary)
 
 
-def _ba_child(conn, job: dict, niceness: int, parent_pid: int) -> None:
-    """The full-BA child process: forked from the worker thread it starts at its nice value;
-    set again so a fork from another thread is niced too. It dies with its parent."""
-    exit_with_parent(parent_pid)
+def _lower_priority(niceness: int, idle: bool, tid: int | None = None) -> None:
+    """The worker's (or its BA child's) background priority; nothing at niceness 0."""
     if niceness > 0:
-        set_thread_niceness(niceness)
+        set_thread_niceness(niceness, tid)
+        if idle:
+            set_thread_idle(True, tid)
+
+
+def _normal_priority(tid: int | None = None) -> None:
+    """Back to SCHED_OTHER at nice 0 (the end of the stream: the run is not slowed at its end)."""
+    set_thread_idle(False, tid)   # first: under SCHED_IDLE the nice value means nothing
+    set_thread_niceness(0, tid)
+
+
+def _ba_child(conn, job: dict, niceness: int, idle: bool, parent_pid: int) -> None:
+    """The full-BA child process: forked from the worker thread it starts at its priority;
+    set again so a fork from another thread gets it too. It dies with its parent."""
+    exit_with_parent(parent_pid)
+    _lower_priority(niceness, idle)
     ba_worker(conn, job)
 
 
 class LoopWorker:
-    def __init__(self, closer, vocabulary, niceness: int = 19, process: bool = True):
+    def __init__(self, closer, vocabulary, niceness: int = 19, process: bool = True, idle: bool = True):
         self.closer = closer
         self.vocabulary = vocabulary
         self.niceness = int(niceness)
+        self.idle = bool(idle) and self.niceness > 0   # SCHED_IDLE on top of the nice value
         self.process = bool(process)
         ctx = multiprocessing.get_context("fork")
         self.inbox = ctx.Queue() if process else queue.Queue()
@@ -102,12 +117,12 @@ class LoopWorker:
         self._finishing.set()
         if self.niceness > 0 and self._tid is not None:
             if self.process:  # every thread of the worker process and its full-BA child
-                set_tree_niceness(self._tid, 0)
+                set_tree_niceness(self._tid, 0, idle=False)
             else:
-                set_thread_niceness(0, self._tid)
+                _normal_priority(self._tid)
                 ba = self._ba
                 if ba is not None:
-                    set_process_niceness(ba[0].pid, 0)
+                    _normal_priority(ba[0].pid)
         self.inbox.put(_END)
 
     def stop(self) -> None:
@@ -145,9 +160,10 @@ class LoopWorker:
         if self.process:  # a SIGKILLed actor takes its worker along (see exit_with_parent)
             exit_with_parent(self._parent)
         self._tid = threading.get_native_id()
-        if self.niceness > 0 and not self._finishing.is_set():
-            set_thread_niceness(self.niceness)   # a process: its only thread; the queue's feeder inherits it
-        self.outbox.put(("extra", {"worker_niceness": thread_niceness(), "worker_process": self.process}))
+        if not self._finishing.is_set():   # a process: its only thread; the queue's feeder inherits it
+            _lower_priority(self.niceness, self.idle)
+        self.outbox.put(("extra", {"worker_niceness": thread_niceness(), "worker_idle": bool(thread_idle()),
+                                   "worker_process": self.process}))
         self._started.set()
         try:
             while True:
@@ -172,11 +188,12 @@ class LoopWorker:
                     # a BA started since then was forked niced)
                     self._finishing.set()
                     if self.niceness > 0:
-                        set_thread_niceness(0)
+                        _normal_priority()
                         if self._ba is not None:
-                            set_process_niceness(self._ba[0].pid, 0)
+                            _normal_priority(self._ba[0].pid)
                     self._finish_ba()
-                    self.outbox.put(("extra", {**self.step_stats(), "worker_niceness_at_end": thread_niceness()}))
+                    self.outbox.put(("extra", {**self.step_stats(), "worker_niceness_at_end": thread_niceness(),
+                                               "worker_idle_at_end": bool(thread_idle())}))
                     self.outbox.put(("done", None))
                     return
                 if item is not None:
@@ -232,12 +249,13 @@ class LoopWorker:
         mp = multiprocessing.get_context("fork")
         parent, child = mp.Pipe(duplex=False)
         niceness = 0 if self._finishing.is_set() else self.niceness
-        proc = mp.Process(target=_ba_child, args=(child, job, niceness, os.getpid()), daemon=True, name="canopy-full-ba")
+        proc = mp.Process(target=_ba_child, args=(child, job, niceness, self.idle, os.getpid()), daemon=True,
+                          name="canopy-full-ba")
         proc.start()
         child.close()
         self._ba = (proc, parent, job["epoch"], time.perf_counter())
         if niceness > 0 and self._finishing.is_set():  # finish() came meanwhile
-            set_process_niceness(proc.pid, 0)
+            _normal_priority(proc.pid)
 
     def _stop_ba(self) -> None:
         """A newer loop makes the running BA's snapshot stale (ORB-SLAM aborts its global BA too)."""
