@@ -76,6 +76,12 @@ class LocalMappingActor(Actor):
             remap_landmarks(msg, self.landmark_alias)
             update = self.mapper.insert_keyframe(msg)
             self.n_keyframes += 1
+            self.last_update = update
+            update.loop_epoch = self.loop_epoch
+            # Tracking may already have finished at the end of a realtime run: never block on it.
+            # Tracking first: it waits for this update (lockstep), the loop closer does not, so
+            # building and encoding the loop keyframe stays off tracking's path.
+            ctx.send("tracking", update, block=False)
             if self.loop_on:
                 if self.mono:
                     from canopy.loop.mono import mono_loop_keyframe_message
@@ -84,10 +90,6 @@ class LocalMappingActor(Actor):
                     loop_msg = loop_keyframe_message(msg, self.mapper, update)
                 loop_msg.loop_epoch = self.loop_epoch  # the loop closer brings older poses up to date
                 ctx.send("loop_closing", loop_msg)
-            self.last_update = update
-            update.loop_epoch = self.loop_epoch
-            # Tracking may already have finished at the end of a realtime run: never block on it.
-            ctx.send("tracking", update, block=False)
             ctx.extra.update({"keyframes": self.n_keyframes, "landmarks": len(self.mapper.landmarks),
                               **{f"{k}_ms": float(v) for k, v in update.timings.items()}})
             if time.monotonic() - self.last_snapshot >= self.snapshot_period:
