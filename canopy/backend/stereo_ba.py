@@ -72,18 +72,20 @@ def _robust_cost(r: np.ndarray, front: np.ndarray, edges: StereoEdges) -> tuple[
     return cost, np.where(front, w, 0.0)
 
 
-def _jacobians(Pc: np.ndarray, R: np.ndarray, edges: StereoEdges, calib: StereoCalibration):
-    """d(u,v,ur)/dxi (E,3,6) for a left perturbation of T_cam_world, and d(u,v,ur)/dX (E,3,3)."""
-    n = len(Pc)
+def _jacobians(Pc: np.ndarray, R: np.ndarray, edges: StereoEdges, calib: StereoCalibration,
+               loc: np.ndarray | None = None):
+    """d(u,v,ur)/dxi (E,3,6) for a left perturbation of T_cam_world, and d(u,v,ur)/dX (E,3,3);
+    with ``loc`` the pose Jacobians of those edges only (the fixed poses' are never used)."""
     Jp = stereo_point_jacobian(Pc, calib, _MIN_DEPTH)
     Jp[:, 2, :] *= edges.stereo[:, None]
+    Jpl, Pcl = (Jp, Pc) if loc is None else (Jp[loc], Pc[loc])
     # dPc/dxi = [-[Pc]x | I]
-    Jc = np.empty((n, 3, 6))
-    Jc[:, :, 3:] = Jp
-    xc, yc, zc = Pc[:, 0, None], Pc[:, 1, None], Pc[:, 2, None]
-    Jc[:, :, 0] = Jp[:, :, 1] * -zc + Jp[:, :, 2] * yc
-    Jc[:, :, 1] = Jp[:, :, 0] * zc - Jp[:, :, 2] * xc
-    Jc[:, :, 2] = -Jp[:, :, 0] * yc + Jp[:, :, 1] * xc
+    Jc = np.empty((len(Pcl), 3, 6))
+    Jc[:, :, 3:] = Jpl
+    xc, yc, zc = Pcl[:, 0, None], Pcl[:, 1, None], Pcl[:, 2, None]
+    Jc[:, :, 0] = Jpl[:, :, 1] * -zc + Jpl[:, :, 2] * yc
+    Jc[:, :, 1] = Jpl[:, :, 0] * zc - Jpl[:, :, 2] * xc
+    Jc[:, :, 2] = -Jpl[:, :, 0] * yc + Jpl[:, :, 1] * xc
     return Jc, Jp @ R
 
 
@@ -187,15 +189,15 @@ class _Linearised:
             r, Pc, R, front = _project(T_cw, X, edges, calib)
             projected = (r, Pc, R, front), _robust_cost(r, front, edges)
         (r, Pc, R, front), (self.cost, w) = projected
-        Jc, Jx = _jacobians(Pc, R, edges, calib)
+        loc = st.loc
+        Jc, Jx = _jacobians(Pc, R, edges, calib, loc)                    # Jc: local edges only
         Wr = r * w[:, None]
         JxT = Jx.transpose(0, 2, 1)
         self.Hpp = st.by_point.sum(JxT @ (Jx * w[:, None, None]))
         self.bp = st.by_point.sum(_mv(JxT, Wr))
-        loc = st.loc
-        JlT = Jc[loc].transpose(0, 2, 1)
+        JlT = Jc.transpose(0, 2, 1)
         wl = w[loc, None, None]
-        self.Hcc = st.loc_by_pose.sum(JlT @ (Jc[loc] * wl))
+        self.Hcc = st.loc_by_pose.sum(JlT @ (Jc * wl))
         self.bc = st.loc_by_pose.sum(_mv(JlT, Wr[loc]))
         self.Hcp = JlT @ (Jx[loc] * wl)                                   # (m,6,3)
         self.pts, self.kf = edges.point[loc], edges.pose[loc]
