@@ -18,11 +18,13 @@ closer is drained before the final map is published.
 """
 from __future__ import annotations
 
+import threading
 import time
 
 import numpy as np
 
 from actors.runtime import Actor, ActorContext
+from actors.schedstat import thread_report, thread_schedstat
 from canopy.backend import LocalMapper
 from canopy.loop.correction import corrections_from_arrays
 from canopy.loop.mapping_hooks import apply_loop_result, catch_up_pose, loop_keyframe_message, remap_landmarks
@@ -53,6 +55,10 @@ class LocalMappingActor(Actor):
         self.loop_epoch = 0                      # loop corrections applied to the map
         self.epoch_corrections: dict[int, dict] = {}  # epoch -> keyframe corrections of that loop
         self.landmark_alias: dict[int, int] = {}  # landmarks fused across a loop -> the one kept
+        # the threads' scheduler statistics from the first keyframe on (stats.json "threads": local
+        # mapping's CPU per tracked frame is what it takes from tracking's two cores)
+        self.sched_start = None
+        self.n_frames = 0
 
     def on_control(self, msg, ctx: ActorContext) -> None:
         if isinstance(msg, SaveMapRequest):  # a remote client's save_map (actors.inspection)
@@ -67,6 +73,8 @@ class LocalMappingActor(Actor):
 
     def on_message(self, msg, ctx: ActorContext) -> None:
         if isinstance(msg, KeyframeData):
+            if self.sched_start is None:
+                self.sched_start = thread_schedstat()
             if msg.loop_epoch < self.loop_epoch:  # tracked before the latest correction reached tracking
                 msg.T_world_cam = catch_up_pose(msg.index, msg.T_world_cam, self.epoch_corrections,
                                                 msg.loop_epoch, self.loop_epoch)
@@ -99,6 +107,7 @@ class LocalMappingActor(Actor):
                 self.last_update.loop_epoch = self.loop_epoch
                 ctx.send("tracking", self.last_update, block=False)
         elif isinstance(msg, EndOfStream):
+            self.n_frames = int(msg.n_frames)
             if self.loop_on:
                 self._drain_loop_closer(msg, ctx)
             ctx.stop()
@@ -145,6 +154,10 @@ class LocalMappingActor(Actor):
             ctx.send("recorder", snap, block=False)
 
     def teardown(self, ctx: ActorContext) -> None:
+        if self.sched_start is not None:  # per frame of the stream (per keyframe if it never ended)
+            ctx.extra["threads"] = thread_report(self.sched_start, thread_schedstat(),
+                                                 {threading.get_native_id(): "local_mapping"},
+                                                 self.n_frames or self.n_keyframes)
         self._publish_snapshot(ctx, final=True)
         if self.config.get("save_map"):  # --save-map: the final (loop-corrected) map, versioned msgpack
             from canopy.loop.map_io import map_from_mapper, save_map

@@ -41,7 +41,7 @@ from canopy.report import write_json  # noqa: E402
 from canopy.sources import open_source  # noqa: E402
 
 STAGES = ("noise_estimate", "orb", "stereo", "match_motion", "pnp", "track_local_map", "keyframe", "total",
-          "stereo_worker")  # the last: right ORB excluded, the worker thread's stereo matching (parallel_stereo)
+          "stereo_worker", "orb_right")  # the worker thread (parallel_stereo): its stereo matching, the right ORB
 MAP_STAGES = ("insert", "window", "ba", "cull", "update", "total")
 
 
@@ -51,7 +51,7 @@ def run_once(dataset: str, frames, calib, sets) -> dict:
     tracker, mapper = Tracker(calib, tp), LocalMapper(calib, mp)
     schedule = MapUpdateSchedule(effective_map_update_lag(rt.map_update_lag_frames, tp))
     track_cpu, map_cpu, step_wall, stage, map_stage = [], [], [], [], []
-    poses, refs, rel = [], [], []
+    poses, refs, rel, reasons = [], [], [], {}
     for frame in frames:
         w0, c0 = time.perf_counter(), time.process_time()
         for update in schedule.take_due(frame.index):
@@ -60,6 +60,8 @@ def run_once(dataset: str, frames, calib, sets) -> dict:
         track_cpu.append((time.process_time() - c0) * 1e3)
         stage.append(res.timings)
         if res.is_keyframe and res.keyframe is not None:
+            for why in (res.keyframe_reason or "init").split("+"):
+                reasons[why] = reasons.get(why, 0) + 1
             c1 = time.process_time()
             update = mapper.insert_keyframe(res.keyframe)
             map_cpu.append((time.process_time() - c1) * 1e3)
@@ -73,11 +75,16 @@ def run_once(dataset: str, frames, calib, sets) -> dict:
     kf = mapper.keyframe_poses()
     est = np.array([kf[r] @ T if T is not None and r in kf else P for P, r, T in zip(poses, refs, rel)])
     return {"track_cpu": track_cpu, "map_cpu": map_cpu, "step_wall": step_wall, "stage": stage,
-            "map_stage": map_stage, "est": est, "keyframes": len(map_cpu)}
+            "map_stage": map_stage, "est": est, "keyframes": len(map_cpu),
+            "keyframe_reasons": reasons}
 
 
 def p50(values) -> float | None:
     return float(np.percentile(values, 50)) if len(values) else None
+
+
+def _sum_or_none(d: dict, keys) -> float | None:
+    return None if any(d.get(k) is None for k in keys) else float(sum(d[k] for k in keys))
 
 
 def main() -> int:
@@ -107,11 +114,12 @@ def main() -> int:
         ate = float(ape(rs[0]["est"], gt, align="se3")["rmse"]) if gt is not None else None
         n = len(frames)
         rows.append({"variant": name, "sets": [f"{s}.{f}={v}" for s, f, v in sets], "frames": n,
-                     "keyframes": rs[0]["keyframes"], "ate_m": ate,
+                     "keyframes": rs[0]["keyframes"], "keyframe_reasons": rs[0]["keyframe_reasons"], "ate_m": ate,
                      "track_cpu_ms_p50": p50(cat("track_cpu")),
                      "track_thread_cpu_ms_p50": stage_cpu["total"], "map_cpu_ms_p50": p50(cat("map_cpu")),
                      "lockstep_cpu_ms_per_frame": float(np.mean([(np.sum(r["track_cpu"]) + np.sum(r["map_cpu"])) / n
                                                                  for r in rs])),
+                     "map_cpu_ms_per_frame": float(np.mean([np.sum(r["map_cpu"]) / n for r in rs])),
                      "lockstep_wall_ms_per_frame": float(np.mean([np.mean(r["step_wall"]) for r in rs])),
                      "stage_wall_ms_p50": stage, "stage_cpu_ms_p50": stage_cpu, "mapping_stage_wall_ms_p50": map_stage})
     fmt = lambda v, s=".1f": "-" if v is None else format(v, s)  # noqa: E731
@@ -124,6 +132,9 @@ def main() -> int:
               f"{fmt(r['map_cpu_ms_p50']):>11s} {fmt(r['track_thread_cpu_ms_p50']):>10s} {fmt(r['lockstep_cpu_ms_per_frame']):>9s} "
               f"{fmt(r['lockstep_wall_ms_per_frame']):>10s}   "
               + " ".join(f"{fmt(r['stage_cpu_ms_p50'][s]):>8s}" for s in STAGES))
+        print(f"{'':12s} keyframe reasons {r['keyframe_reasons']}; worker thread CPU p50 "
+              f"{fmt(_sum_or_none(r['stage_cpu_ms_p50'], ('orb_right', 'stereo_worker')))} ms; "
+              f"mapping CPU per frame {fmt(r['map_cpu_ms_per_frame'])} ms")
         print(f"{'':12s} mapping wall p50: " + ", ".join(f"{k} {fmt(v)}" for k, v in r["mapping_stage_wall_ms_p50"].items()))
     out = a.out or ROOT / "docs" / "results" / f"profile_tracking_{a.dataset}.json"
     write_json(out, {"dataset": a.dataset, "path": a.path, "frames": len(frames), "reps": a.reps,

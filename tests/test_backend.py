@@ -124,3 +124,36 @@ def test_restart_starts_new_segment_without_links():
     upd = mapper.insert_keyframe(kf)
     assert set(upd.landmark_ids.tolist()) == set(range(1000, 1000 + n))
     assert mapper.keyframes[1].segment == mapper.keyframes[0].segment + 1
+
+
+def test_schur_solver_sums_repeated_observations():
+    """A pose that observes a point twice contributes both blocks to the Schur complement: with
+    every observation given twice (the cost doubles, the optimum stays) the solver lands on the
+    same optimum as with each observation once."""
+    from canopy.backend.stereo_ba import StereoEdges, bundle_adjust_points
+
+    rng = np.random.default_rng(4)
+    poses, X = scene(rng, n=60)
+    T_true = np.stack([se3_inv(T) for T in poses])
+    edges = []
+    for k in range(N_KF):
+        meas, _ = project_stereo(T_true[k], X, CALIB)
+        edges.append((np.full(len(X), k), np.arange(len(X)), meas))
+    pose, point, meas = (np.concatenate(c) for c in zip(*edges))
+    n_local = N_KF - 1  # the last pose is the fixed gauge
+    order = np.r_[1:N_KF, 0]
+    T_init = T_true[order].copy()
+    for i in range(n_local):
+        T_init[i] = se3_exp(np.r_[0.01 * rng.standard_normal(3), 0.03 * rng.standard_normal(3)]) @ T_init[i]
+    X_init = X + 0.05 * rng.standard_normal(X.shape)
+    remap = np.argsort(order)[pose]
+
+    def solve(reps):
+        e = StereoEdges(np.tile(remap, reps), np.tile(point, reps), np.tile(meas, (reps, 1)),
+                        np.ones(reps * len(pose), bool), np.ones(reps * len(pose)), np.full(reps * len(pose), 1e3))
+        return bundle_adjust_points(T_init, n_local, X_init, e, CALIB, 30)
+
+    once, twice = solve(1), solve(2)
+    assert np.abs(once[0] - T_true[order]).max() < 1e-6
+    assert np.abs(twice[0] - once[0]).max() < 1e-8
+    assert np.abs(twice[1] - X).max() < 1e-6

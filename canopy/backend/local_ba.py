@@ -146,15 +146,16 @@ class LocalBundleAdjustmentMixin:
             a = np.flatnonzero(active)
             edges = StereoEdges(pose_of_edge[a], point_of_edge[a], meas[a], stereo[a], sigma[a], huber[a])
             T_cw, X, _ = bundle_adjust_points(T_cw, len(local), X, edges, self.calib, p.ba_iterations)
-            bad = edge_chi2(T_cw, X, all_edges, self.calib, p.min_depth) > thr
-            if not (active & bad).any():
+            # the last pass's test is at the final estimate: it also decides the write-back below
+            over = edge_chi2(T_cw, X, all_edges, self.calib, p.min_depth) > thr
+            if not (active & over).any():
                 break
-            active &= ~bad
+            active &= ~over
         for i, k in enumerate(local):
             self.keyframes[k].T_world_cam = se3_inv(T_cw[i])
         for j, lid in enumerate(lm_ids):
             self.landmarks[lid].position = X[j].copy()
-        bad = ~active | (edge_chi2(T_cw, X, all_edges, self.calib, p.min_depth) > thr)
+        bad = ~active | over
         for j in np.flatnonzero(bad).tolist():
             self._remove_observation(int(e_lm[j]), int(e_kf[j]))
 

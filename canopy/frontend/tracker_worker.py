@@ -69,7 +69,9 @@ class StereoJob:
         self._left.set_exception(error)
 
     def _run(self, extractor, frame, calib, params, scale_factors, noise_sigma, fast) -> StereoMatches:
+        t0 = stage_clock()
         right = extractor.extract(frame.right, *fast)
+        record_stage(self.timings, "orb_right", t0)
         left = self._left.result()
         t0 = stage_clock()
         stereo = frame_stereo(left, right, frame, calib, params, scale_factors, noise_sigma)
