@@ -120,6 +120,7 @@ def subpixel_refine(left_img: np.ndarray, right_img: np.ndarray, uvl: np.ndarray
         denom = 2.0 * (d1 + d3 - 2.0 * d2)
         with np.errstate(divide="ignore", invalid="ignore"):
             delta = np.where(denom > 0, (d1 - d3) / denom, 0.0)
+        delta = np.where(interior, delta, 0.0)  # no parabola at the window's edge (ORB-SLAM2: rejected)
         good = interior & (np.abs(delta) <= 1.0)
         u_out[sel] = s * (xr0 + (best - L) + delta)
         sad_out[sel] = sad[idx, best]
