@@ -152,11 +152,8 @@ def test_cell_descriptors_stereo_match_about_as_many_as_opencv(kitti_params, ran
     ``harris2x`` 98 % over the 11 pairs 0, 5, ..., 50 (7208 vs 7355; pair 0: 739 each), so the
     descriptors on our pyramid with our angles match as cv2.ORB's do; ``fast`` (the default, ORB-SLAM's
     choice) 85 % on these three (1731 vs 2039): it keeps FAST-strongest corners in low-texture road
-    and sky cells where stereo is ambiguous -- and still tracks better (docs/notes/s6-cells.md).
-    Measured with ORB-SLAM2's centre-pixel SAD, which this comparison of descriptors keeps; with
-    kitti.yaml's zero-mean SAD (s7) ``harris2x`` gets 94 % on these three (1995 vs 2132)."""
+    and sky cells where stereo is ambiguous -- and still tracks better (docs/notes/s6-cells.md)."""
     src = open_source("kitti")
-    kitti_params = replace(kitti_params, subpixel_normalise="centre")
     pc = replace(kitti_params, extractor="cells", cell_ranking=ranking)
     n_cells = n_cv = 0
     for i in (0, 20, 40):

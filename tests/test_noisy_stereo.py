@@ -63,10 +63,7 @@ def _bad_fraction(params, calib, left, right, ref_disp, noise_aware: bool):
 
 def test_noise_aware_sad_acceptance_rejects_wrong_depths_on_hazy_noisy_pairs_only():
     src = open_source("kitti", KITTI)
-    # the rule's SNR thresholds were measured on ORB-SLAM2's centre-pixel SAD (s4); kitti.yaml now uses
-    # zero-mean SAD, whose SADs on the same patches are smaller (docs/notes/s7-haze.md)
-    params = replace(load_run_config("kitti").tracking, parallel_extraction=False, sad_outlier_factor_noisy=1.5,
-                     subpixel_normalise="centre")
+    params = replace(load_run_config("kitti").tracking, parallel_extraction=False, sad_outlier_factor_noisy=1.5)
     cell = DegradeParams(mode="haze+noise", beta=0.06, full_well=NOISE_LEVELS["high"][0],
                          read_noise=NOISE_LEVELS["high"][1])
     totals = {k: np.zeros(3, int) for k in ("clean_fixed", "clean_aware", "hazy_fixed", "hazy_aware")}
