@@ -62,6 +62,25 @@ class MapTrackingMixin:
                 best = (self._last_points_w[q3], r3, np.full(len(q3), -1, np.int64), self._last_words[q3])
         return best
 
+    def _explained_by_prediction(self, T_pred_cw: np.ndarray, X: np.ndarray, uv: np.ndarray) -> np.ndarray:
+        """Stage-1 matches the constant-velocity prediction can explain: projected within the wide
+        search radius of their keypoint (matches hundreds of pixels off cannot be right if the motion is)."""
+        if len(X) == 0:
+            return np.zeros(0, bool)
+        proj, Pc = project_stereo(T_pred_cw, X, self.calib)
+        err = np.linalg.norm(proj[:, :2] - uv, axis=1)
+        return (Pc[:, 2] > 0) & (err <= self.params.search_radius_wide)
+
+    def _start_from_prediction(self, T_pred_cw: np.ndarray, X: np.ndarray, uv: np.ndarray, inliers: np.ndarray):
+        """RANSAC found no pose (hazy, noisy frames: a quarter of the appearance matches right, too few
+        for 100 EPnP samples): (prediction, the matches it explains, True) to refine from, as ORB-SLAM's
+        TrackWithMotionModel does (no RANSAC, a robust refinement from the predicted pose); (None,
+        ``inliers``, False) when it explains fewer than min_inliers."""
+        near = self._explained_by_prediction(T_pred_cw, X, uv)
+        if near.sum() >= self.params.min_inliers:
+            return T_pred_cw, near, True
+        return None, inliers, False
+
     def _ransac(self, frame_index: int, X: np.ndarray, uv: np.ndarray):
         """EPnP inside RANSAC (AGRI §3.2.3), seeded per frame for determinism."""
         p = self.params

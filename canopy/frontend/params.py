@@ -68,6 +68,10 @@ class TrackingParams:
     octave_tolerance: int = 1           # right keypoint may sit one pyramid level away
     subpixel_window: int = 5            # half size of the SAD patch (11x11 as ORB-SLAM2)
     subpixel_search: int = 5            # SAD search +/- px around the descriptor match
+    # What each SAD patch has subtracted (canopy.frontend.stereo.subpixel_refine): "centre", its
+    # centre pixel (ORB-SLAM2), or "mean" (zero-mean SAD; the centre pixel's noise shifts the whole
+    # patch, which on hazy noisy frames puts a third of the matches > 1 px off)
+    subpixel_normalise: str = "centre"
     sad_outlier_factor: float = 2.1     # reject SAD > factor * median (1.5 * 1.4 in ORB-SLAM2)
     # ... on hazy / noisy frames a stricter factor (canopy.frontend.noisy_features): the factor falls
     # linearly from sad_outlier_factor to sad_outlier_factor_noisy as the frame's matching SNR (median
@@ -135,6 +139,12 @@ class TrackingParams:
     pnp_iterations: int = 100
     pnp_confidence: float = 0.999
     min_inliers: int = 15
+    # When EPnP RANSAC finds no pose and the motion model is valid: refine the pose from the
+    # constant-velocity prediction on the stage-1 matches it explains (ORB-SLAM's
+    # TrackWithMotionModel), then the local-map search as usual; track_health still judges it.
+    # On in configs/kitti.yaml (docs/notes/s7-haze.md); off here until EuRoC and the generated
+    # presets are measured with it.
+    track_from_prediction: bool = False
     pixel_sigma: float = 1.0            # px at octave 0 (measurement sigma = pixel_sigma * scale**octave)
     # Motion-only refinement after RANSAC (ORB-SLAM's PoseOptimization): rounds of
     # Gauss-Newton on stereo reprojection errors with a Huber kernel, re-classifying
@@ -227,6 +237,7 @@ class TrackingParams:
              "must be > 0 (at or above sad_outlier_factor: off)")
         need(0 <= self.sad_snr_low < self.sad_snr_high, "sad_snr_low", "must be >= 0 and < sad_snr_high")
         need(self.subpixel_search >= 1, "subpixel_search", "must be >= 1")
+        need(self.subpixel_normalise in ("centre", "mean"), "subpixel_normalise", "must be 'centre' or 'mean'")
         need(abs(self.disparity_offset_px) < 5, "disparity_offset_px", "must be within +-5 px")
         need(abs(self.disparity_offset_cells_px) < 5, "disparity_offset_cells_px", "must be within +-5 px")
         need(self.search_radius > 0, "search_radius", "must be > 0")

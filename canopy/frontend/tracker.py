@@ -373,6 +373,8 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
         _stage(timings, "pnp", t0)
         lview = self._line_map_view() if lines is not None else None
         from_prediction = False
+        if T_cw is None and p.track_from_prediction and self._velocity_valid:  # ORB-SLAM's TrackWithMotionModel
+            T_cw, inliers, from_prediction = self._start_from_prediction(T_pred_cw, X, feats.uv[r], inliers)
         if T_cw is None and lview is not None and len(lview):
             # too few points for RANSAC: start from the constant-velocity prediction and let the
             # line terms carry the pose (robust rounds sort out the stage-1 point outliers)
