@@ -11,12 +11,13 @@ per frame, split about the camera's x (pitch), y (yaw) and z (roll) axes.
     PYTHONPATH=$PWD CANOPY_CACHE_DIR=/work/cache python benchmarks/diagnose_drift.py \
         --path /work/cache/synthetic/day-loop-seed0-full --out /tmp/drift_base.npz [--set tracking.x=1]
 
-``--oracle-depth drop|mono`` (generated sequences only: needs the generator's exact depth,
-``mav0/depth0``): a diagnosis, not a method. Every stereo point whose stereo depth is more than
-``--oracle-tol`` (10 %) off the exact depth at its pixel, or that sits on sky, is either dropped
-(no stereo, no landmark: ``drop``) or measured bearing-only and makes no landmark (``mono``: the
-handling of ``tracking.contour_enabled``, with a perfect detector). It says how much of the drift
-the wrong stereo depths cause, and what a perfect occluding-contour test could gain.
+``--oracle-depth`` (generated sequences only: needs the generator's exact depth, ``mav0/depth0``):
+a diagnosis, not a method. Every stereo point whose stereo depth is more than ``--oracle-tol``
+(10 %) off the exact depth at its pixel, or that sits on sky, is measured bearing-only and makes
+no landmark: the handling of ``tracking.contour_enabled`` with a perfect detector in place of
+StereoBM (dropping the stereo match instead gives the same trajectory: the keypoint is then a
+monocular observation all the same). It says how much of the drift the wrong stereo depths
+cause, and what a perfect occluding-contour test could gain.
 """
 from __future__ import annotations
 
@@ -76,7 +77,7 @@ def wrong_depth(depth_map: np.ndarray, uv: np.ndarray, stereo_depth: np.ndarray,
     return (z <= 0) | (np.abs(stereo_depth / np.maximum(z, 1e-6) - 1.0) > tol)
 
 
-def oracle_tracker(calib, tp, path, mode: str, tol: float):
+def oracle_tracker(calib, tp, path, tol: float):
     """A Tracker whose occluding-contour flags come from the exact depth (see the docstring)."""
     from dataclasses import replace
     from canopy.frontend.stereo import StereoMatches
@@ -92,21 +93,18 @@ def oracle_tracker(calib, tp, path, mode: str, tol: float):
             v = np.flatnonzero(stereo.valid)
             bad = np.zeros(len(stereo.depth), bool)
             bad[v] = wrong_depth(self._oracle_depth, feats.uv[v], stereo.depth[v], tol)
-            if mode == "drop":
-                return StereoMatches(np.where(bad, -1.0, stereo.u_right).astype(np.float32),
-                                     np.where(bad, -1.0, stereo.depth).astype(np.float32), stereo.n_candidates)
             return StereoMatches(stereo.u_right, stereo.depth, stereo.n_candidates, on_contour=bad)
 
     # contour_enabled routes every frame's matches through _flag_contours
     return OracleTracker(calib, replace(tp, contour_enabled=True))
 
 
-def run(dataset, path, max_frames, sets, oracle=None, oracle_tol=0.10):
+def run(dataset, path, max_frames, sets, oracle=False, oracle_tol=0.10):
     cfg = with_settings(load_run_config(dataset), [parse_setting(s) for s in sets])
     tp, mp = cfg.tracking, cfg.mapping
     src = open_source("euroc" if dataset == "synthetic" else dataset, path, max_frames=max_frames)
     calib = src.calibration
-    tracker = Tracker(calib, tp) if oracle is None else oracle_tracker(calib, tp, path, oracle, oracle_tol)
+    tracker = oracle_tracker(calib, tp, path, oracle_tol) if oracle else Tracker(calib, tp)
     mapper = LocalMapper(calib, mp)
     n = len(src) if max_frames is None else min(len(src), max_frames)
     rec = {k: [] for k in ("online", "n_inl", "n_match", "is_kf", "status")}
@@ -171,8 +169,8 @@ def main() -> int:
     ap.add_argument("--set", action="append", default=[], help="section.name=value parameter override")
     ap.add_argument("--out", default=None, help=".npz with every per-frame and per-keyframe record")
     ap.add_argument("--segments", type=int, default=10)
-    ap.add_argument("--oracle-depth", choices=("drop", "mono"), default=None,
-                    help="generated sequences: stereo points with a wrong depth (exact depth) dropped / bearing-only")
+    ap.add_argument("--oracle-depth", action="store_true",
+                    help="generated sequences: stereo points with a wrong depth (vs the exact depth) bearing-only")
     ap.add_argument("--oracle-tol", type=float, default=0.10, help="relative depth error counted as wrong")
     args = ap.parse_args()
     d = run(args.dataset, args.path, args.max_frames, args.set, args.oracle_depth, args.oracle_tol)
