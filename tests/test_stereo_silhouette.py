@@ -150,3 +150,18 @@ def test_flag_off_leaves_tracking_unchanged():
     assert np.all(first.u_right[truth] >= 0) and np.all(first.new_landmark_ids[truth] >= 0)
     kf_on, _, _ = _track(TrackingParams(contour_enabled=True, **NO_SAD))
     assert (kf_on[0].u_right < 0).sum() > (first.u_right < 0).sum()  # and on, it does change them
+
+
+def test_contour_landmarks_keeps_rim_points_in_the_map_as_bearing_only():
+    # tracking.contour_landmarks: rim points still lose their right column (bearing-only in
+    # tracking and BA) but now make landmarks at their stereo depth. In this clean scene with the
+    # SAD test off the sliding rim landmarks cost frame 4 its inliers (docs/notes/s7-drift.md), so
+    # four frames only
+    keyframes, out, _ = _track(TrackingParams(contour_enabled=True, contour_landmarks=True, **NO_SAD), n=4)
+    first = keyframes[0]
+    *_, depth = _scene()
+    truth = _true_contour(depth, first.uv.astype(np.float64)) & (first.depth > 0)
+    on_rim = truth & (first.u_right < 0)
+    assert on_rim.sum() >= 0.8 * truth.sum()
+    assert np.all(first.new_landmark_ids[on_rim] >= 0)
+    assert max(e for _, e, _ in out) < 0.01 and max(a for _, _, a in out) < 0.1

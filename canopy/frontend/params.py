@@ -133,6 +133,10 @@ class TrackingParams:
     contour_downscale: int = 2
     contour_max_disparity_px: float = 64.0
     contour_octave_scaled: bool = False  # window times scale_factor^octave (a level's SAD window)
+    # Contour points still make landmarks (placed at their stereo depth, observed bearing-only in
+    # tracking and BA): without them the far crowns / sky rims that pin the heading leave the map
+    # (docs/notes/s7-drift.md). False: contour points make no landmark (s6's rule).
+    contour_landmarks: bool = False
 
     # --- motion estimation (AGRI §3.2.3: EPnP in RANSAC, then motion-only refinement)
     pnp_reprojection_error: float = 3.0  # px, RANSAC inlier threshold

@@ -166,7 +166,8 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
         return transform(T_wc, Pc)
 
     def _landmark_candidates(self, stereo: StereoMatches) -> np.ndarray:
-        return self._surface_stereo(stereo) & (stereo.depth < self._max_depth)
+        ok = stereo.valid if self.params.contour_landmarks else self._surface_stereo(stereo)
+        return ok & (stereo.depth < self._max_depth)
 
     def _close(self, stereo: StereoMatches) -> np.ndarray:
         return self._surface_stereo(stereo) & (stereo.depth < self._close_depth)
