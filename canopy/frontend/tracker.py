@@ -159,41 +159,6 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
     def _sigma(self, octave: np.ndarray) -> np.ndarray:
         return self.params.pixel_sigma * self.scale_factors[octave]
 
-    def _stereo_points_world(self, feats: Features, stereo: StereoMatches, T_wc: np.ndarray, idx: np.ndarray):
-        z = stereo.depth[idx].astype(np.float64)
-        u, v = feats.uv[idx, 0].astype(np.float64), feats.uv[idx, 1].astype(np.float64)
-        Pc = np.stack([(u - self.calib.cx) * z / self.calib.fx, (v - self.calib.cy) * z / self.calib.fy, z], axis=1)
-        return transform(T_wc, Pc)
-
-    def _landmark_candidates(self, stereo: StereoMatches) -> np.ndarray:
-        ok = stereo.valid if self.params.contour_landmarks else self._surface_stereo(stereo)
-        return ok & (stereo.depth < self._max_depth)
-
-    def _close(self, stereo: StereoMatches) -> np.ndarray:
-        return self._surface_stereo(stereo) & (stereo.depth < self._close_depth)
-
-    def _stereo(self, stereo: StereoMatches | StereoJob, timings: dict) -> StereoMatches:
-        """The frame's stereo matches, waiting for the worker's job if they are pending (its
-        wait is the tracking thread's "stereo" stage); the first call also flags points on occluding
-        contours (tracking.contour_*) and derives the matches pose refinement sees (far and
-        contour points bearing only)."""
-        if stereo is self._stereo_last:  # already this frame's (contour-flagged) matches
-            return stereo
-        if isinstance(stereo, StereoJob):
-            t0 = _clock()
-            job, stereo = stereo, stereo.result()
-            if self._stereo_raw is not stereo:
-                _stage(timings, "stereo", t0)
-                timings.update(job.timings)
-        if self._stereo_raw is not stereo:
-            self._stereo_raw = stereo
-            if self._silhouette is not None:  # occluding-contour points: monocular (stereo_silhouette)
-                t0 = _clock()
-                stereo = self._flag_contours(*self._contour_inputs, stereo)
-                _stage(timings, "contour", t0)
-            self._stereo_last, self._stereo_obs = stereo, self._bearing_only_far(stereo)
-        return self._stereo_last
-
     # ------------------------------------------------------------------ main entry
     def track(self, frame: StereoFrame, fast_threshold: int | None = None,
               fast_fallback: int | None = None, fast_min_keypoints: int = 0) -> TrackingResult:

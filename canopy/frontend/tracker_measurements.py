@@ -4,7 +4,9 @@ far stereo points as bearing-only measurements (ORB-SLAM's ThDepth role,
 same way (``TrackingParams.contour_enabled``, ``canopy.frontend.stereo_silhouette``), and
 ORB-SLAM's isInFrustum test of the local-map search (viewing angle and scale range,
 ``TrackingParams.view_max_angle_deg``).
-Uses the tracker's ``params``, ``scale_factors`` and its ``_stereo_obs_depth``, ``_silhouette``,
+The frame's stereo matches as pose refinement and landmark creation see them (``_stereo``,
+``_landmark_candidates``, ``_close``) live here too. Uses the tracker's ``params``,
+``scale_factors``, ``calib``, its ``_stereo_raw`` / ``_contour_inputs`` and its ``_stereo_obs_depth``, ``_silhouette``,
 ``_stereo_last`` / ``_stereo_obs``, ``_lm_normal`` / ``_lm_max_dist`` state.
 """
 from __future__ import annotations
@@ -12,12 +14,50 @@ from __future__ import annotations
 import numpy as np
 
 from canopy.frontend.features import Features
+from canopy.frontend.geometry import transform
 from canopy.frontend.stereo import StereoMatches
 from canopy.frontend.stereo_silhouette import ContourParams, SilhouetteDetector
+from canopy.frontend.tracker_worker import StereoJob, record_stage as _stage, stage_clock as _clock
 
 
 class TrackerMeasurementsMixin:
     """Bearing-only far points and the frustum test (see the module docstring)."""
+
+    def _stereo_points_world(self, feats: Features, stereo: StereoMatches, T_wc: np.ndarray, idx: np.ndarray):
+        z = stereo.depth[idx].astype(np.float64)
+        u, v = feats.uv[idx, 0].astype(np.float64), feats.uv[idx, 1].astype(np.float64)
+        Pc = np.stack([(u - self.calib.cx) * z / self.calib.fx, (v - self.calib.cy) * z / self.calib.fy, z], axis=1)
+        return transform(T_wc, Pc)
+
+    def _landmark_candidates(self, stereo: StereoMatches) -> np.ndarray:
+        ok = stereo.valid if self.params.contour_landmarks else self._surface_stereo(stereo)
+        return ok & (stereo.depth < self._max_depth)
+
+    def _close(self, stereo: StereoMatches) -> np.ndarray:
+        return self._surface_stereo(stereo) & (stereo.depth < self._close_depth)
+
+    def _stereo(self, stereo: StereoMatches | StereoJob, timings: dict) -> StereoMatches:
+        """The frame's stereo matches, waiting for the worker's job if they are pending (its
+        wait is the tracking thread's "stereo" stage); the first call also flags points on occluding
+        contours (tracking.contour_*) and derives the matches pose refinement sees (far and
+        contour points bearing only)."""
+        if stereo is self._stereo_last:  # already this frame's (contour-flagged) matches
+            return stereo
+        if isinstance(stereo, StereoJob):
+            t0 = _clock()
+            job, stereo = stereo, stereo.result()
+            if self._stereo_raw is not stereo:
+                _stage(timings, "stereo", t0)
+                timings.update(job.timings)
+        if self._stereo_raw is not stereo:
+            self._stereo_raw = stereo
+            if self._silhouette is not None:  # occluding-contour points: monocular (stereo_silhouette)
+                t0 = _clock()
+                stereo = self._flag_contours(*self._contour_inputs, stereo)
+                _stage(timings, "contour", t0)
+            self._stereo_last, self._stereo_obs = stereo, self._bearing_only_far(stereo)
+        return self._stereo_last
+
 
     def _make_silhouette_detector(self) -> SilhouetteDetector | None:
         """The contour test of ``tracking.contour_*``; None when it is off."""
