@@ -115,6 +115,12 @@ class LoopWorker:
     def finish(self) -> None:
         """End of the stream: the remaining work at normal priority, then ("done", None)."""
         self._finishing.set()
+        self._normal_priority_everywhere()
+        self.inbox.put(_END)
+
+    def _normal_priority_everywhere(self) -> None:
+        """The worker (and a running full BA) back to SCHED_OTHER at nice 0, from the actor's side:
+        at the end of the stream, and at teardown, where the worker must get a core to leave."""
         if self.niceness > 0 and self._tid is not None:
             if self.process:  # every thread of the worker process and its full-BA child
                 set_tree_niceness(self._tid, 0, idle=False)
@@ -123,12 +129,12 @@ class LoopWorker:
                 ba = self._ba
                 if ba is not None:
                     _normal_priority(ba[0].pid)
-        self.inbox.put(_END)
 
     def stop(self) -> None:
         """Teardown: the worker leaves after its current step, a running BA is stopped."""
         if self._runner is None:
             return
+        self._normal_priority_everywhere()  # a SCHED_IDLE worker on busy cores would not get to _STOP
         try:
             self.inbox.put(_STOP)
         except (OSError, ValueError):
