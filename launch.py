@@ -7,6 +7,7 @@ processes, prints progress and a summary, and writes the results folder.
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 import warnings
 
@@ -124,5 +125,15 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def answer_ctrl_c() -> None:
+    """Ctrl-C stops a run cleanly (the supervisor keeps what was computed), whatever SIGINT
+    disposition this process inherited: Python leaves SIGINT ignored when its parent ignored it
+    (a shell's background job, a test runner), and a blocked SIGINT stays blocked across exec."""
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, [signal.SIGINT])
+
+
 if __name__ == "__main__":
+    answer_ctrl_c()
     sys.exit(main())

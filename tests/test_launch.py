@@ -219,23 +219,30 @@ def test_lines_flow_through_the_actors(tmp_path):
     assert em["translation_m"] < 0.01 and em["rotation_deg"] < 0.5
 
 
-@pytest.mark.parametrize("how", ["ctrl-c", "sigterm"])
+def _ignore_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+@pytest.mark.parametrize("how", ["ctrl-c", "sigterm", "ctrl-c-inherited-ignored"])
 def test_user_interrupt_stops_cleanly_and_keeps_results(tmp_path, how):
     """Ctrl-C reaches the whole process group; SIGTERM only the launcher. Both end the run
-    cleanly with what was computed written out and the shared memory removed."""
+    cleanly with what was computed written out and the shared memory removed. Ctrl-C works
+    even when the launcher's parent ignored SIGINT (inherited across exec, and Python then
+    leaves it ignored: the full suite once handed it down that way)."""
     endpoint = f"ipc://{tmp_path}/inspect"
     out = tmp_path / "run"
     proc = subprocess.Popen([sys.executable, str(ROOT / "launch.py"), "--dataset", "euroc", "--clock", "realtime",
                              "--out", str(out), "--inspect", endpoint, "--quiet"],
                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+                            start_new_session=True,
+                            preexec_fn=_ignore_sigint if how == "ctrl-c-inherited-ignored" else None)
     try:
         posed = 0
         for msg in inspection_client(endpoint, ["pose"], timeout_s=120):
             posed += msg.status in ("init", "ok")
             if msg.index >= 15:
                 break
-        if how == "ctrl-c":
+        if how.startswith("ctrl-c"):
             os.killpg(proc.pid, signal.SIGINT)
         else:
             proc.send_signal(signal.SIGTERM)
