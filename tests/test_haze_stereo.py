@@ -26,40 +26,15 @@ from canopy.frontend.stereo import match_stereo, subpixel_refine
 from canopy.sources import open_source
 from shared.errors import ConfigError
 from shared.types import StereoFrame
+from tests.test_tracking_speed import _sad_reference
 
 KITTI = Path(__file__).resolve().parents[1] / "data" / "kitti06_snippet"
 FRAMES = (5, 20, 35)
 
 
-def _zero_mean_reference(left_img, right_img, uvl, ur, octave, scale_factors, w, L):
+def _zero_mean_reference(*args):
     """Zero-mean SAD search written out keypoint by keypoint (float64)."""
-    import cv2
-    h0, w0 = left_img.shape
-    u_out, sad_out, ok_out = np.full(len(uvl), -1.0), np.full(len(uvl), np.inf), np.zeros(len(uvl), bool)
-    for i in range(len(uvl)):
-        s = scale_factors[octave[i]]
-        size = (int(round(w0 / s)), int(round(h0 / s)))
-        il = left_img if octave[i] == 0 else cv2.resize(left_img, size, interpolation=cv2.INTER_LINEAR)
-        ir = right_img if octave[i] == 0 else cv2.resize(right_img, size, interpolation=cv2.INTER_LINEAR)
-        xl, yl, xr = (int(np.round(uvl[i, 0] / s)), int(np.round(uvl[i, 1] / s)), int(np.round(ur[i] / s)))
-        hh, ww = il.shape
-        if not (yl - w >= 0 and yl + w < hh and xl - w >= 0 and xl + w < ww and xr - L - w >= 0 and xr + L + w < ww):
-            continue
-        pl = il[yl - w:yl + w + 1, xl - w:xl + w + 1].astype(np.float64)
-        pl -= pl.mean()
-        costs = []
-        for d in range(-L, L + 1):
-            pr = ir[yl - w:yl + w + 1, xr + d - w:xr + d + w + 1].astype(np.float64)
-            costs.append(float(np.abs(pr - pr.mean() - pl).sum()))
-        best = int(np.argmin(costs))
-        u_out[i], sad_out[i] = s * (xr + best - L), costs[best]
-        if 0 < best < 2 * L:
-            d1, d2, d3 = costs[best - 1], costs[best], costs[best + 1]
-            denom = 2.0 * (d1 + d3 - 2.0 * d2)
-            delta = (d1 - d3) / denom if denom > 0 else 0.0
-            u_out[i] = s * (xr + (best - L) + delta)
-            ok_out[i] = abs(delta) <= 1.0
-    return u_out, sad_out, ok_out
+    return _sad_reference(*args, normalise="mean")
 
 
 def test_zero_mean_sad_equals_the_keypoint_by_keypoint_search():

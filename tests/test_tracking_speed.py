@@ -131,9 +131,16 @@ def test_stereo_candidates_equal_one_row_band_filtered_afterwards(kitti_features
     assert all(np.array_equal(a, b) for a, b in zip(before, after))
 
 
-def _sad_reference(left_img, right_img, uvl, ur, octave, scale_factors, w, L):
-    """ORB-SLAM2's SAD search written out keypoint by keypoint (int64 sums)."""
+def _sad_reference(left_img, right_img, uvl, ur, octave, scale_factors, w, L, normalise="centre"):
+    """ORB-SLAM2's SAD search written out keypoint by keypoint: patches minus their centre pixel
+    (int64 sums), or minus their mean (``normalise="mean"``, float64; tests/test_haze_stereo.py)."""
     import cv2
+    dtype = np.float64 if normalise == "mean" else np.int64
+
+    def flat(p):
+        p = p.astype(dtype)
+        return p - (p.mean() if normalise == "mean" else p[w, w])
+
     h0, w0 = left_img.shape
     u_out, sad_out, ok_out = np.full(len(uvl), -1.0), np.full(len(uvl), np.inf), np.zeros(len(uvl), bool)
     for i in range(len(uvl)):
@@ -145,12 +152,9 @@ def _sad_reference(left_img, right_img, uvl, ur, octave, scale_factors, w, L):
         hh, ww = il.shape
         if not (yl - w >= 0 and yl + w < hh and xl - w >= 0 and xl + w < ww and xr - L - w >= 0 and xr + L + w < ww):
             continue
-        pl = il[yl - w:yl + w + 1, xl - w:xl + w + 1].astype(np.int64)
-        pl -= pl[w, w]
-        costs = []
-        for d in range(-L, L + 1):
-            pr = ir[yl - w:yl + w + 1, xr + d - w:xr + d + w + 1].astype(np.int64)
-            costs.append(float(np.abs(pr - pr[w, w] - pl).sum()))
+        pl = flat(il[yl - w:yl + w + 1, xl - w:xl + w + 1])
+        costs = [float(np.abs(flat(ir[yl - w:yl + w + 1, xr + d - w:xr + d + w + 1]) - pl).sum())
+                 for d in range(-L, L + 1)]
         best = int(np.argmin(costs))
         u_out[i], sad_out[i] = s * (xr + best - L), costs[best]
         if 0 < best < 2 * L:
