@@ -56,15 +56,24 @@ def test_another_thread_is_reniced_by_its_id_and_back_when_allowed():
 
 
 def test_a_process_forked_from_a_niced_thread_starts_niced():
+    box = _fork_from_a_lowered_thread(lambda: set_thread_niceness(19), thread_niceness)
+    assert box["child"] == 19
+    assert not set_process_niceness(2**22 + 12345, 5)        # no such process: False, no exception
+
+
+def _fork_from_a_lowered_thread(lower, probe) -> dict:
+    """In a new thread: ``lower()`` its priority, ``probe()`` it, fork a process that sends back its
+    own ``probe()``. Returns {"set": lower's result, "mine": the thread's probe, "child": the child's}."""
     import multiprocessing
 
     mp = multiprocessing.get_context("fork")
-    parent, child = mp.Pipe(duplex=False)
     box = {}
 
     def work():
-        set_thread_niceness(19)
-        p = mp.Process(target=_report_niceness, args=(child,))
+        box["set"] = lower()
+        box["mine"] = probe()
+        parent, child = mp.Pipe(duplex=False)
+        p = mp.Process(target=_report, args=(child, probe))
         p.start()
         box["child"] = parent.recv()
         p.join(10)
@@ -72,12 +81,11 @@ def test_a_process_forked_from_a_niced_thread_starts_niced():
     t = threading.Thread(target=work)
     t.start()
     t.join(30)
-    assert box["child"] == 19
-    assert not set_process_niceness(2**22 + 12345, 5)        # no such process: False, no exception
+    return box
 
 
-def _report_niceness(conn):
-    conn.send(thread_niceness())
+def _report(conn, probe):
+    conn.send(probe())
 
 
 def test_bad_niceness_is_named():
@@ -201,31 +209,12 @@ def test_a_forked_helper_dies_with_its_sigkilled_parent(tmp_path):
 
 
 def test_idle_policy_is_per_thread_and_inherited_by_a_fork():
-    import multiprocessing
-
     from canopy.loop.priority import set_thread_idle
 
     if not IDLE_POLICY:
         pytest.skip("no SCHED_IDLE on this platform")
-    mp = multiprocessing.get_context("fork")
-    box = {}
-
-    def background():
-        box["set"] = set_thread_idle(True)
-        box["mine"] = thread_idle()
-        parent, child = mp.Pipe(duplex=False)
-        p = mp.Process(target=_report_idle, args=(child,))
-        p.start()
-        box["child"] = parent.recv()
-        p.join(10)
-
-    t = threading.Thread(target=background)
-    t.start()
-    t.join(30)
+    box = _fork_from_a_lowered_thread(lambda: set_thread_idle(True), thread_idle)
     assert box == {"set": True, "mine": True, "child": True}
     assert not thread_idle()                    # the caller's thread keeps SCHED_OTHER
     assert not set_thread_idle(True, 2**22 + 12345)   # no such thread: False, no exception
 
-
-def _report_idle(conn):
-    conn.send(thread_idle())
