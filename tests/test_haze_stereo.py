@@ -17,7 +17,6 @@ import numpy as np
 import pytest
 
 from canopy.config import load_run_config
-from canopy.degrade import NOISE_LEVELS, DegradeParams, degrade_image, depth_from_stereo, disparity_sgbm, ray_length
 from canopy.frontend import Tracker
 from canopy.frontend.features import OrbExtractor
 from canopy.frontend.geometry import se3_inv
@@ -26,6 +25,7 @@ from canopy.frontend.stereo import match_stereo, subpixel_refine
 from canopy.sources import open_source
 from shared.errors import ConfigError
 from shared.types import StereoFrame
+from tests.test_noisy_stereo import hazy_noisy_pair
 from tests.test_tracking_speed import _sad_reference
 
 KITTI = Path(__file__).resolve().parents[1] / "data" / "kitti06_snippet"
@@ -74,16 +74,9 @@ def _off_disparity(params, calib, left, right, ref_disp):
 def test_zero_mean_sad_puts_fewer_stereo_matches_off_on_hazy_noisy_and_clean_pairs():
     src = open_source("kitti", KITTI)
     base = replace(load_run_config("kitti").tracking, parallel_extraction=False)
-    cell = DegradeParams(mode="haze+noise", beta=0.06, full_well=NOISE_LEVELS["high"][0],
-                         read_noise=NOISE_LEVELS["high"][1])
     totals = {k: np.zeros(3, int) for k in ("clean_centre", "clean_mean", "hazy_centre", "hazy_mean")}
     for i in FRAMES:
-        f = src.frame(i)
-        ref = disparity_sgbm(f.left, f.right).astype(np.float64)
-        ray_l = ray_length(depth_from_stereo(f.left, f.right, src.calibration), src.calibration)
-        ray_r = ray_length(depth_from_stereo(f.left, f.right, src.calibration, view="right"), src.calibration)
-        hl = degrade_image(f.left, cell, ray_l, rng=2 * i)
-        hr = degrade_image(f.right, cell, ray_r, rng=2 * i + 1)
+        f, ref, hl, hr = hazy_noisy_pair(src, i)
         for norm in ("centre", "mean"):
             p = replace(base, subpixel_normalise=norm)
             totals[f"clean_{norm}"] += _off_disparity(p, src.calibration, f.left, f.right, ref)

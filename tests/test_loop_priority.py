@@ -217,4 +217,3 @@ def test_idle_policy_is_per_thread_and_inherited_by_a_fork():
     assert box == {"set": True, "mine": True, "child": True}
     assert not thread_idle()                    # the caller's thread keeps SCHED_OTHER
     assert not set_thread_idle(True, 2**22 + 12345)   # no such thread: False, no exception
-

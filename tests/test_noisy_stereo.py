@@ -48,6 +48,18 @@ def test_sad_acceptance_factor_falls_with_the_snr():
             TrackingParams(**bad)
 
 
+def hazy_noisy_pair(src, i: int):
+    """KITTI frame ``i``, its SGBM reference disparity, and the pair degraded by haze β 0.06 /m
+    (from the stereo depth) and the noisy sensor, with a fixed noise draw per image."""
+    cell = DegradeParams(mode="haze+noise", beta=0.06, full_well=NOISE_LEVELS["high"][0],
+                         read_noise=NOISE_LEVELS["high"][1])
+    f = src.frame(i)
+    ref = disparity_sgbm(f.left, f.right).astype(np.float64)
+    ray_l = ray_length(depth_from_stereo(f.left, f.right, src.calibration), src.calibration)
+    ray_r = ray_length(depth_from_stereo(f.left, f.right, src.calibration, view="right"), src.calibration)
+    return f, ref, degrade_image(f.left, cell, ray_l, rng=2 * i), degrade_image(f.right, cell, ray_r, rng=2 * i + 1)
+
+
 def _bad_fraction(params, calib, left, right, ref_disp, noise_aware: bool):
     ext_l, ext_r = OrbExtractor(params), OrbExtractor(params)
     fl, fr = ext_l.extract(left), ext_r.extract(right)
@@ -64,16 +76,9 @@ def _bad_fraction(params, calib, left, right, ref_disp, noise_aware: bool):
 def test_noise_aware_sad_acceptance_rejects_wrong_depths_on_hazy_noisy_pairs_only():
     src = open_source("kitti", KITTI)
     params = replace(load_run_config("kitti").tracking, parallel_extraction=False, sad_outlier_factor_noisy=1.5)
-    cell = DegradeParams(mode="haze+noise", beta=0.06, full_well=NOISE_LEVELS["high"][0],
-                         read_noise=NOISE_LEVELS["high"][1])
     totals = {k: np.zeros(3, int) for k in ("clean_fixed", "clean_aware", "hazy_fixed", "hazy_aware")}
     for i in FRAMES:
-        f = src.frame(i)
-        ref = disparity_sgbm(f.left, f.right).astype(np.float64)
-        ray_l = ray_length(depth_from_stereo(f.left, f.right, src.calibration), src.calibration)
-        ray_r = ray_length(depth_from_stereo(f.left, f.right, src.calibration, view="right"), src.calibration)
-        hl = degrade_image(f.left, cell, ray_l, rng=2 * i)
-        hr = degrade_image(f.right, cell, ray_r, rng=2 * i + 1)
+        f, ref, hl, hr = hazy_noisy_pair(src, i)
         for key, (l, r, aware) in {"clean_fixed": (f.left, f.right, False), "clean_aware": (f.left, f.right, True),
                                    "hazy_fixed": (hl, hr, False), "hazy_aware": (hl, hr, True)}.items():
             totals[key] += _bad_fraction(params, src.calibration, l, r, ref, aware)
