@@ -20,15 +20,18 @@ from canopy.frontend.stereo import StereoMatches
 class MapTrackingMixin:
     """3D-2D matching and pose estimation of one frame (see the module docstring)."""
 
-    def _search(self, T_cw, pos, words, feats: Features, kp_words, radius: float, scaled: bool = False):
-        """Project points with a pose and match each to the best keypoint within ``radius``."""
+    def _search(self, T_cw, pos, words, feats: Features, kp_words, radius: float, scaled: bool = False,
+                ratio: float | None = None):
+        """Project points with a pose and match each to the best keypoint within ``radius``
+        (Lowe ratio ``ratio``, default map_ratio)."""
         proj, Pc = project_stereo(T_cw, pos, self.calib)
         in_view = ((Pc[:, 2] > 0) & (proj[:, 0] >= 0) & (proj[:, 0] < self.calib.width)
                    & (proj[:, 1] >= 0) & (proj[:, 1] < self.calib.height))
         r_scale = self.scale_factors[feats.octave] if scaled else None
         r_level = feats.octave if scaled and self.params.map_ratio_same_level else None
         q, r, _ = match_in_window(proj[:, :2], words, np.full(len(pos), radius), feats.uv, kp_words,
-                                  self.params.map_max_hamming, self.params.map_ratio, q_mask=in_view,
+                                  self.params.map_max_hamming, self.params.map_ratio if ratio is None else ratio,
+                                  q_mask=in_view,
                                   r_scale=r_scale, r_level=r_level)
         return q, r, in_view
 
@@ -41,26 +44,37 @@ class MapTrackingMixin:
         enough = 2 * p.min_inliers
         # ORB-SLAM TrackWithMotionModel: the landmarks matched in the previous frame
         pos, words, lids = self._last_matched
-        q, r, _ = self._search(T_pred_cw, pos, words, feats, kp_words, p.search_radius)
+        q, r, _ = self._search(T_pred_cw, pos, words, feats, kp_words, p.search_radius, ratio=p.motion_ratio)
         if len(q) < enough:  # widen the window when too few matches
-            q, r, _ = self._search(T_pred_cw, pos, words, feats, kp_words, p.search_radius_wide)
+            q, r, _ = self._search(T_pred_cw, pos, words, feats, kp_words, p.search_radius_wide,
+                                   ratio=p.motion_ratio)
         best = (pos[q], r, lids[q], words[q])
         if len(q) < enough:  # the whole local map through the prediction
-            q, r, _ = self._search(T_pred_cw, view.pos, view.words, feats, kp_words, p.search_radius_wide)
+            q, r, _ = self._search(T_pred_cw, view.pos, view.words, feats, kp_words, p.search_radius_wide,
+                                   ratio=p.motion_ratio)
             if len(q) > len(best[1]):
                 best = (view.pos[q], r, view.ids[q], view.words[q])
         if len(best[1]) < enough and len(view.ids):
             # no usable prediction: appearance only (RANSAC sorts out the outliers)
-            r2, q2, _ = knn_match(feats.descriptors, view.desc, p.map_max_hamming, p.map_ratio)
-            if len(q2) > len(best[1]):
-                best = (view.pos[q2], r2, view.ids[q2], view.words[q2])
+            cand = self._appearance_matches(view, feats)
+            if len(cand[1]) > len(best[1]):
+                best = cand
         if len(best[1]) < enough and self._last_points_w is not None and len(self._last_points_w):
             # last resort: the previous frame's stereo points (frame-to-frame odometry)
             q3, r3, _ = self._search(T_pred_cw, self._last_points_w, self._last_words, feats, kp_words,
-                                     p.search_radius_wide)
+                                     p.search_radius_wide, ratio=p.motion_ratio)
             if len(q3) > len(best[1]):
                 best = (self._last_points_w[q3], r3, np.full(len(q3), -1, np.int64), self._last_words[q3])
         return best
+
+    def _appearance_matches(self, view: MapView, feats: Features):
+        """Local-map points matched to keypoints by descriptor alone (ORB-SLAM's
+        TrackReferenceKeyFrame role: no pose needed), as (points, keypoints, ids, words)."""
+        p = self.params
+        if len(view.ids) == 0:
+            return np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, np.int64), view.words[:0]
+        r2, q2, _ = knn_match(feats.descriptors, view.desc, p.map_max_hamming, p.map_ratio)
+        return view.pos[q2], r2, view.ids[q2], view.words[q2]
 
     def _explained_by_prediction(self, T_pred_cw: np.ndarray, X: np.ndarray, uv: np.ndarray) -> np.ndarray:
         """Stage-1 matches the constant-velocity prediction can explain: projected within the wide
