@@ -17,9 +17,7 @@ from canopy.config import load_run_config
 from canopy.degrade import NOISE_LEVELS, DegradeParams, degrade_image, depth_from_stereo, ray_length
 from canopy.frontend import Tracker
 from canopy.frontend.geometry import se3_inv
-from canopy.frontend.params import TrackingParams
 from canopy.sources import open_source
-from shared.errors import ConfigError
 from shared.types import StereoFrame
 
 KITTI = Path(__file__).resolve().parents[1] / "data" / "kitti06_snippet"
@@ -53,10 +51,3 @@ def test_frame_after_initialisation_is_tracked_by_appearance_matches(noise):
     # a tracked pose, not the prediction: within 5 cm of the truth (the prediction is 1.2 m off)
     err = se3_inv(res.T_world_cam) @ truth[1]
     assert np.linalg.norm(err[:3, 3]) < 0.05
-
-
-def test_stage1_settings_are_validated():
-    with pytest.raises(ConfigError, match="motion_ratio"):
-        TrackingParams(motion_ratio=0.0)
-    with pytest.raises(ConfigError, match="motion_pose"):
-        TrackingParams(motion_pose="guess")

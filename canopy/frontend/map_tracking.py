@@ -20,18 +20,15 @@ from canopy.frontend.stereo import StereoMatches
 class MapTrackingMixin:
     """3D-2D matching and pose estimation of one frame (see the module docstring)."""
 
-    def _search(self, T_cw, pos, words, feats: Features, kp_words, radius: float, scaled: bool = False,
-                ratio: float | None = None):
-        """Project points with a pose and match each to the best keypoint within ``radius``
-        (Lowe ratio ``ratio``, default map_ratio)."""
+    def _search(self, T_cw, pos, words, feats: Features, kp_words, radius: float, scaled: bool = False):
+        """Project points with a pose and match each to the best keypoint within ``radius``."""
         proj, Pc = project_stereo(T_cw, pos, self.calib)
         in_view = ((Pc[:, 2] > 0) & (proj[:, 0] >= 0) & (proj[:, 0] < self.calib.width)
                    & (proj[:, 1] >= 0) & (proj[:, 1] < self.calib.height))
         r_scale = self.scale_factors[feats.octave] if scaled else None
         r_level = feats.octave if scaled and self.params.map_ratio_same_level else None
         q, r, _ = match_in_window(proj[:, :2], words, np.full(len(pos), radius), feats.uv, kp_words,
-                                  self.params.map_max_hamming, self.params.map_ratio if ratio is None else ratio,
-                                  q_mask=in_view,
+                                  self.params.map_max_hamming, self.params.map_ratio, q_mask=in_view,
                                   r_scale=r_scale, r_level=r_level)
         return q, r, in_view
 
@@ -44,14 +41,12 @@ class MapTrackingMixin:
         enough = 2 * p.min_inliers
         # ORB-SLAM TrackWithMotionModel: the landmarks matched in the previous frame
         pos, words, lids = self._last_matched
-        q, r, _ = self._search(T_pred_cw, pos, words, feats, kp_words, p.search_radius, ratio=p.motion_ratio)
+        q, r, _ = self._search(T_pred_cw, pos, words, feats, kp_words, p.search_radius)
         if len(q) < enough:  # widen the window when too few matches
-            q, r, _ = self._search(T_pred_cw, pos, words, feats, kp_words, p.search_radius_wide,
-                                   ratio=p.motion_ratio)
+            q, r, _ = self._search(T_pred_cw, pos, words, feats, kp_words, p.search_radius_wide)
         best = (pos[q], r, lids[q], words[q])
         if len(q) < enough:  # the whole local map through the prediction
-            q, r, _ = self._search(T_pred_cw, view.pos, view.words, feats, kp_words, p.search_radius_wide,
-                                   ratio=p.motion_ratio)
+            q, r, _ = self._search(T_pred_cw, view.pos, view.words, feats, kp_words, p.search_radius_wide)
             if len(q) > len(best[1]):
                 best = (view.pos[q], r, view.ids[q], view.words[q])
         if len(best[1]) < enough and len(view.ids):
@@ -62,7 +57,7 @@ class MapTrackingMixin:
         if len(best[1]) < enough and self._last_points_w is not None and len(self._last_points_w):
             # last resort: the previous frame's stereo points (frame-to-frame odometry)
             q3, r3, _ = self._search(T_pred_cw, self._last_points_w, self._last_words, feats, kp_words,
-                                     p.search_radius_wide, ratio=p.motion_ratio)
+                                     p.search_radius_wide)
             if len(q3) > len(best[1]):
                 best = (self._last_points_w[q3], r3, np.full(len(q3), -1, np.int64), self._last_words[q3])
         return best

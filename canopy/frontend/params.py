@@ -96,16 +96,6 @@ class TrackingParams:
     # brute-force descriptor matching (TrackReferenceKeyFrame's role; ratio test + RANSAC).
     search_radius: float = 10.0         # px around the predicted projection
     search_radius_wide: float = 40.0    # second attempt when the first finds too few
-    # Lowe ratio of the stage-1 window search (the projection of the last frame's / the local map's
-    # points through the prediction). ORB-SLAM's SearchByProjection(Frame, LastFrame) has none
-    # (1.0 here: off, only exact ties rejected): on hazy noisy frames the second-best candidate is
-    # often within 20 % of the best and the ratio test drops the right match with it.
-    motion_ratio: float = 0.8
-    # Stage-1 pose: "ransac" (EPnP RANSAC on the stage-1 matches, the prediction only when RANSAC
-    # finds none) or "prediction" (ORB-SLAM's TrackWithMotionModel: robust motion-only refinement
-    # from the constant-velocity prediction on the matches it explains, RANSAC only when it has
-    # no valid velocity or explains too few).
-    motion_pose: str = "ransac"
     # When EPnP RANSAC finds no pose on the window matches and there is no valid velocity (the frame
     # after an initialisation), retry RANSAC on descriptor-only matches against the local map
     # (ORB-SLAM's TrackReferenceKeyFrame): the window around a zero-motion prediction holds few right
@@ -263,8 +253,6 @@ class TrackingParams:
         need(self.search_radius_wide >= self.search_radius, "search_radius_wide", "must be >= search_radius")
         need(self.search_radius_local > 0, "search_radius_local", "must be > 0")
         need(0 < self.map_ratio <= 1, "map_ratio", "must be in (0, 1]")
-        need(0 < self.motion_ratio <= 1, "motion_ratio", "must be in (0, 1] (1: off)")
-        need(self.motion_pose in ("ransac", "prediction"), "motion_pose", "must be 'ransac' or 'prediction'")
         need(self.max_depth_baselines > 0, "max_depth_baselines", "must be > 0")
         need(self.close_depth_baselines > 0, "close_depth_baselines", "must be > 0")
         need(self.stereo_obs_max_depth_baselines >= 0, "stereo_obs_max_depth_baselines", "must be >= 0 (0: no limit)")

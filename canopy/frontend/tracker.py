@@ -335,11 +335,7 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
         X, r, ids, words = self._initial_matches(T_pred_cw, view, feats, kp_words)
         _stage(timings, "match_motion", t0)
         t0 = _clock()
-        T_cw, inliers, from_prediction = None, np.zeros(len(X), bool), False
-        if p.motion_pose == "prediction" and self._velocity_valid:  # ORB-SLAM's TrackWithMotionModel
-            T_cw, inliers, from_prediction = self._start_from_prediction(T_pred_cw, X, feats.uv[r], inliers)
-        if T_cw is None:
-            T_cw, inliers = self._ransac(frame.index, X, feats.uv[r])
+        T_cw, inliers = self._ransac(frame.index, X, feats.uv[r])
         if T_cw is None and not self._velocity_valid and p.appearance_retry:
             # the window matches came through a prediction that cannot be trusted (the frame after
             # (re)initialisation: no velocity yet, the car moved 1.2 m): try appearance matches
@@ -349,6 +345,7 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
                 T_cw, inliers, X, r, ids, words = T2, inl2, X2, r2, ids2, words2
         _stage(timings, "pnp", t0)
         lview = self._line_map_view() if lines is not None else None
+        from_prediction = False
         if T_cw is None and p.track_from_prediction and self._velocity_valid:  # ORB-SLAM's TrackWithMotionModel
             T_cw, inliers, from_prediction = self._start_from_prediction(T_pred_cw, X, feats.uv[r], inliers)
         if T_cw is None and lview is not None and len(lview):
