@@ -51,9 +51,9 @@ class MapTrackingMixin:
                 best = (view.pos[q], r, view.ids[q], view.words[q])
         if len(best[1]) < enough and len(view.ids):
             # no usable prediction: appearance only (RANSAC sorts out the outliers)
-            r2, q2, _ = knn_match(feats.descriptors, view.desc, p.map_max_hamming, p.map_ratio)
-            if len(q2) > len(best[1]):
-                best = (view.pos[q2], r2, view.ids[q2], view.words[q2])
+            cand = self._appearance_matches(view, feats)
+            if len(cand[1]) > len(best[1]):
+                best = cand
         if len(best[1]) < enough and self._last_points_w is not None and len(self._last_points_w):
             # last resort: the previous frame's stereo points (frame-to-frame odometry)
             q3, r3, _ = self._search(T_pred_cw, self._last_points_w, self._last_words, feats, kp_words,
@@ -61,6 +61,15 @@ class MapTrackingMixin:
             if len(q3) > len(best[1]):
                 best = (self._last_points_w[q3], r3, np.full(len(q3), -1, np.int64), self._last_words[q3])
         return best
+
+    def _appearance_matches(self, view: MapView, feats: Features):
+        """Local-map points matched to keypoints by descriptor alone (ORB-SLAM's
+        TrackReferenceKeyFrame role: no pose needed), as (points, keypoints, ids, words)."""
+        p = self.params
+        if len(view.ids) == 0:
+            return np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, np.int64), view.words[:0]
+        r2, q2, _ = knn_match(feats.descriptors, view.desc, p.map_max_hamming, p.map_ratio)
+        return view.pos[q2], r2, view.ids[q2], view.words[q2]
 
     def _explained_by_prediction(self, T_pred_cw: np.ndarray, X: np.ndarray, uv: np.ndarray) -> np.ndarray:
         """Stage-1 matches the constant-velocity prediction can explain: projected within the wide

@@ -96,6 +96,11 @@ class TrackingParams:
     # brute-force descriptor matching (TrackReferenceKeyFrame's role; ratio test + RANSAC).
     search_radius: float = 10.0         # px around the predicted projection
     search_radius_wide: float = 40.0    # second attempt when the first finds too few
+    # When EPnP RANSAC finds no pose on the window matches and there is no valid velocity (the frame
+    # after an initialisation), retry RANSAC on descriptor-only matches against the local map
+    # (ORB-SLAM's TrackReferenceKeyFrame): the window around a zero-motion prediction holds few right
+    # matches when the camera moves fast (KITTI: 1.2 m per frame).
+    appearance_retry: bool = False
     # Stage 2 (ORB-SLAM TrackLocalMap): re-project the whole local map with the RANSAC pose
     # and search a small circle, then refine the pose on all those matches.
     search_radius_local: float = 4.0    # px at octave 0, scaled by the keypoint's scale

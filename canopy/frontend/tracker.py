@@ -336,6 +336,13 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
         _stage(timings, "match_motion", t0)
         t0 = _clock()
         T_cw, inliers = self._ransac(frame.index, X, feats.uv[r])
+        if T_cw is None and not self._velocity_valid and p.appearance_retry:
+            # the window matches came through a prediction that cannot be trusted (the frame after
+            # (re)initialisation: no velocity yet, the car moved 1.2 m): try appearance matches
+            X2, r2, ids2, words2 = self._appearance_matches(view, feats)
+            T2, inl2 = self._ransac(frame.index, X2, feats.uv[r2])
+            if T2 is not None:
+                T_cw, inliers, X, r, ids, words = T2, inl2, X2, r2, ids2, words2
         _stage(timings, "pnp", t0)
         lview = self._line_map_view() if lines is not None else None
         from_prediction = False
