@@ -87,13 +87,92 @@ class Candidate:
     common_words: int     # point words shared with the query
 
 
+def _as_arrays(bow: Bow) -> tuple[np.ndarray, np.ndarray]:
+    """A BoW vector as (word ids sorted, weights)."""
+    if not bow:
+        return np.zeros(0, np.int64), np.zeros(0, np.float64)
+    w = np.fromiter(bow.keys(), np.int64, len(bow))
+    v = np.fromiter(bow.values(), np.float64, len(bow))
+    order = np.argsort(w, kind="stable")
+    return w[order], v[order]
+
+
+class InvertedIndex:
+    """Word -> (keyframe, weight) postings as flat arrays sorted by word, so a query gathers the
+    postings of all its words at once (DBoW2's inverted file, vectorised): the loop closer queries
+    with every keyframe, and a dict-of-dicts walk in Python cost ~70 ms per query on a
+    400-keyframe map (issue 10: the loop closer's CPU competes with tracking on 2 cores).
+
+    New keyframes go to a tail that is merged into the sorted arrays once it holds a quarter as
+    many postings (amortised O(n log n)); removed keyframes are masked, then dropped at a merge."""
+
+    MIN_MERGE = 4096
+
+    def __init__(self):
+        self._words = np.zeros(0, np.int64)
+        self._kfs = np.zeros(0, np.int64)
+        self._vals = np.zeros(0, np.float64)
+        self._tail: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self._tail_len = 0
+        self._removed: set[int] = set()
+
+    def add(self, kf: int, words: np.ndarray, vals: np.ndarray) -> None:
+        self._removed.discard(kf)
+        if len(words):
+            self._tail.append((words, np.full(len(words), kf, np.int64), vals))
+            self._tail_len += len(words)
+        if self._tail_len > max(self.MIN_MERGE, len(self._words) // 4):
+            self._merge()
+
+    def remove(self, kf: int) -> None:
+        self._removed.add(int(kf))
+
+    def _merge(self) -> None:
+        parts = [(self._words, self._kfs, self._vals), *self._tail]
+        w, k, v = (np.concatenate([p[i] for p in parts]) for i in range(3))
+        if self._removed:
+            keep = ~np.isin(k, np.fromiter(self._removed, np.int64, len(self._removed)))
+            w, k, v = w[keep], k[keep], v[keep]
+            self._removed = set()
+        order = np.argsort(w, kind="stable")   # stable: postings of a word stay in insertion order
+        self._words, self._kfs, self._vals = w[order], k[order], v[order]
+        self._tail, self._tail_len = [], 0
+
+    def accumulate(self, q_words: np.ndarray, q_vals: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """For every stored keyframe sharing a word with the query (sorted ``q_words``): its id,
+        sum over shared words of |a|+|b|-|a-b| (twice the L1 score's sum, halved by the caller)
+        and the number of shared words."""
+        empty = (np.zeros(0, np.int64), np.zeros(0, np.float64), np.zeros(0, np.int64))
+        if not len(q_words):
+            return empty
+        lo = np.searchsorted(self._words, q_words, side="left")
+        hi = np.searchsorted(self._words, q_words, side="right")
+        counts = hi - lo
+        total = int(counts.sum())
+        pos = np.repeat(lo - np.cumsum(counts) + counts, counts) + np.arange(total)
+        kfs, vb, va = self._kfs[pos], self._vals[pos], np.repeat(q_vals, counts)
+        if self._tail:
+            tw, tk, tv = (np.concatenate([p[i] for p in self._tail]) for i in range(3))
+            j = np.clip(np.searchsorted(q_words, tw), 0, len(q_words) - 1)
+            hit = q_words[j] == tw
+            kfs, vb, va = np.r_[kfs, tk[hit]], np.r_[vb, tv[hit]], np.r_[va, q_vals[j[hit]]]
+        if self._removed:
+            keep = ~np.isin(kfs, np.fromiter(self._removed, np.int64, len(self._removed)))
+            kfs, vb, va = kfs[keep], vb[keep], va[keep]
+        if not len(kfs):
+            return empty
+        ids, inv = np.unique(kfs, return_inverse=True)
+        terms = np.abs(va) + np.abs(vb) - np.abs(va - vb)
+        return ids, np.bincount(inv, weights=terms, minlength=len(ids)), np.bincount(inv, minlength=len(ids))
+
+
 class KeyframeDatabase:
     """``add`` / ``remove`` keyframes, ``query`` by BoW vector; ``score`` between two stored ones."""
 
     def __init__(self):
         self._entries: dict[int, _Entry] = {}
-        self._index: dict[int, dict[int, float]] = {}       # point word -> {keyframe: weight}
-        self._line_index: dict[int, dict[int, float]] = {}  # line word -> {keyframe: weight}
+        self._index = InvertedIndex()        # point words
+        self._line_index = InvertedIndex()   # line words
 
     def __len__(self) -> int:
         return len(self._entries)
@@ -109,22 +188,14 @@ class KeyframeDatabase:
             raise CanopyError(f"keyframe database: keyframe {kf} is already stored")
         entry = _Entry(dict(bow), dict(line_bow or {}), stats or FeatureStats(n_points=len(bow)))
         self._entries[kf] = entry
-        for w, v in entry.bow.items():
-            self._index.setdefault(int(w), {})[kf] = float(v)
-        for w, v in entry.line_bow.items():
-            self._line_index.setdefault(int(w), {})[kf] = float(v)
+        self._index.add(kf, *_as_arrays(entry.bow))
+        self._line_index.add(kf, *_as_arrays(entry.line_bow))
 
     def remove(self, kf: int) -> None:
-        entry = self._entries.pop(kf, None)
-        if entry is None:
+        if self._entries.pop(kf, None) is None:
             return
-        for index, bow in ((self._index, entry.bow), (self._line_index, entry.line_bow)):
-            for w in bow:
-                posting = index.get(w)
-                if posting is not None:
-                    posting.pop(kf, None)
-                    if not posting:
-                        del index[w]
+        self._index.remove(kf)
+        self._line_index.remove(kf)
 
     def bow(self, kf: int) -> Bow:
         return self._entries[kf].bow
@@ -140,46 +211,37 @@ class KeyframeDatabase:
         stats = stats or FeatureStats(n_points=len(bow))
         return combined_score(l1_score(bow, e.bow), l1_score(line_bow or {}, e.line_bow), stats, e.stats)
 
-    @staticmethod
-    def _accumulate(index: dict[int, dict[int, float]], bow: Bow, exclude) -> tuple[dict[int, float], dict[int, int]]:
-        """Sum of |a|+|b|-|a-b| per keyframe over shared words (halved by the caller), and
-        the number of shared words, touching only the postings of the query's words."""
-        acc: dict[int, float] = {}
-        common: dict[int, int] = {}
-        for w, va in bow.items():
-            posting = index.get(w)
-            if not posting:
-                continue
-            for kf, vb in posting.items():
-                if kf in exclude:
-                    continue
-                acc[kf] = acc.get(kf, 0.0) + abs(va) + abs(vb) - abs(va - vb)
-                common[kf] = common.get(kf, 0) + 1
-        return acc, common
+    def scores(self, bow: Bow, line_bow: Bow | None = None, stats: FeatureStats | None = None) -> dict[int, tuple[float, int]]:
+        """Combined score and shared point words of the query with every stored keyframe that
+        shares a word with it (one pass over the inverted index; others score 0)."""
+        stats = stats or FeatureStats(n_points=len(bow))
+        ids, acc, common = self._index.accumulate(*_as_arrays(bow))
+        out = {int(k): [0.5 * a, int(c)] for k, a, c in zip(ids.tolist(), acc.tolist(), common.tolist())}
+        line = {}
+        if line_bow:
+            l_ids, l_acc, _ = self._line_index.accumulate(*_as_arrays(line_bow))
+            line = dict(zip(l_ids.tolist(), (0.5 * l_acc).tolist()))
+            for k in line:
+                out.setdefault(int(k), [0.0, 0])
+        return {k: (combined_score(sp, line.get(k, 0.0), stats, self._entries[k].stats), c)
+                for k, (sp, c) in out.items()}
 
     def query(self, bow: Bow, line_bow: Bow | None = None, stats: FeatureStats | None = None,
-              exclude=frozenset(), min_score: float = 0.0, min_common_words_ratio: float = 0.0) -> list[Candidate]:
+              exclude=frozenset(), min_score: float = 0.0, min_common_words_ratio: float = 0.0,
+              scores: dict[int, tuple[float, int]] | None = None) -> list[Candidate]:
         """Stored keyframes sharing words with the query, best first (ORB-SLAM
         DetectLoopCandidates steps 1-2): only keyframes sharing at least
         ``min_common_words_ratio`` x the most words any keyframe shares, and scoring at
         least ``min_score`` (ORB-SLAM: the lowest score of the query's covisible
-        neighbours, so that a candidate looks at least as alike as the views next to it)."""
-        stats = stats or FeatureStats(n_points=len(bow))
-        acc, common = self._accumulate(self._index, bow, exclude)
-        line_acc: dict[int, float] = {}
-        if line_bow:
-            line_acc, line_common = self._accumulate(self._line_index, line_bow, exclude)
-            for kf in line_common:
-                common.setdefault(kf, 0)
+        neighbours, so that a candidate looks at least as alike as the views next to it).
+        ``scores``: this query's ``scores(...)`` when the caller already has them."""
+        if scores is None:
+            scores = self.scores(bow, line_bow, stats)
+        common = {k: v for k, v in scores.items() if k not in exclude}
         if not common:
             return []
-        max_common = max(common.values())
-        out = []
-        for kf, n_common in common.items():
-            if n_common < min_common_words_ratio * max_common:
-                continue
-            s = combined_score(0.5 * acc.get(kf, 0.0), 0.5 * line_acc.get(kf, 0.0), stats, self._entries[kf].stats)
-            if s >= min_score:
-                out.append(Candidate(kf, s, n_common))
+        max_common = max(c for _, c in common.values())
+        out = [Candidate(k, s, c) for k, (s, c) in common.items()
+               if c >= min_common_words_ratio * max_common and s >= min_score]
         out.sort(key=lambda c: (-c.score, c.keyframe))
         return out

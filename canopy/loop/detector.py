@@ -30,19 +30,28 @@ class Covisibility:
     """Landmark observations of keyframes -> shared-landmark counts between keyframes."""
 
     def __init__(self):
-        self._observers: dict[int, set[int]] = {}      # landmark -> keyframes
+        self._observers: dict[int, list[int]] = {}     # landmark -> keyframes
         self._counts: dict[int, dict[int, int]] = {}   # keyframe -> {keyframe: shared landmarks}
 
     def add(self, kf: int, landmark_ids: np.ndarray) -> None:
+        ids = np.asarray(landmark_ids, np.int64)
         mine = self._counts.setdefault(kf, {})
-        for lid in np.unique(np.asarray(landmark_ids, np.int64)[np.asarray(landmark_ids) >= 0]).tolist():
-            obs = self._observers.setdefault(lid, set())
-            for other in obs:
-                if other != kf:
-                    mine[other] = mine.get(other, 0) + 1
-                    theirs = self._counts.setdefault(other, {})
-                    theirs[kf] = theirs.get(kf, 0) + 1
-            obs.add(kf)
+        others: list[int] = []
+        get = self._observers.get
+        for lid in np.unique(ids[ids >= 0]).tolist():
+            obs = get(lid)
+            if obs is None:
+                self._observers[lid] = [kf]
+            elif kf not in obs:
+                others.extend(obs)
+                obs.append(kf)
+        if not others:
+            return
+        ks, n = np.unique(np.asarray(others, np.int64), return_counts=True)  # shared landmarks per keyframe
+        for other, shared in zip(ks.tolist(), n.tolist()):
+            mine[other] = mine.get(other, 0) + shared
+            theirs = self._counts.setdefault(other, {})
+            theirs[kf] = theirs.get(kf, 0) + shared
 
     def neighbours(self, kf: int, min_shared: int) -> dict[int, int]:
         return {k: n for k, n in self._counts.get(kf, {}).items() if n >= min_shared}
@@ -135,15 +144,16 @@ class LoopDetector:
         neighbours = self.covisibility.neighbours(kf.index, p.covisibility_min_shared)
         if not neighbours:
             return []
-        min_score = min(self.database.score_with(kf.bow, kf.line_bow, kf.stats, k) for k in neighbours
-                        if k in self.database) if any(k in self.database for k in neighbours) else 0.0
+        scores = self.database.scores(kf.bow, kf.line_bow, kf.stats)   # one pass: neighbours and candidates
+        in_db = [k for k in neighbours if k in self.database]
+        min_score = min(scores.get(k, (0.0, 0))[0] for k in in_db) if in_db else 0.0
         recent = set(self._order[-p.exclude_recent_keyframes - 1:])
         here = self._path[kf.index]
         recent |= {k for k in self._order if here - self._path[k] < p.min_loop_path_m}
         exclude = set(neighbours) | recent | {kf.index}
         cands = self.database.query(kf.bow, kf.line_bow, kf.stats, exclude=exclude,
                                     min_score=p.min_score_factor * min_score,
-                                    min_common_words_ratio=p.min_common_words_ratio)
+                                    min_common_words_ratio=p.min_common_words_ratio, scores=scores)
         if not cands:
             return []
         score = {c.keyframe: c.score for c in cands}

@@ -43,6 +43,9 @@ class LoopParams:
     max_hamming: int = 50                 # ORB-SLAM TH_LOW
     match_ratio: float = 0.75             # SearchByBoW's nearest / second nearest
     min_matches: int = 20                 # descriptor matches needed before RANSAC
+    # hypotheses of the loop pose: "rigid" (3 matched stereo points, Horn's closed form, solved and
+    # scored in one batch: canopy.loop.rigid_ransac) or "epnp" (cv2.solvePnPRansac, 5 points each)
+    verify_ransac: str = "rigid"
     pnp_iterations: int = 300
     pnp_reprojection_error: float = 3.0   # px
     pnp_confidence: float = 0.999
@@ -133,6 +136,7 @@ class LoopParams:
         need(0 < self.match_ratio <= 1, "match_ratio", "must be in (0, 1]")
         need(self.min_matches >= 4, "min_matches", "must be >= 4 (PnP)")
         need(self.min_pnp_inliers >= 4, "min_pnp_inliers", "must be >= 4")
+        need(self.verify_ransac in ("rigid", "epnp"), "verify_ransac", "must be 'rigid' or 'epnp'")
         need(self.min_inliers >= self.min_pnp_inliers, "min_inliers", "must be >= min_pnp_inliers")
         need(self.pnp_reprojection_error > 0, "pnp_reprojection_error", "must be > 0")
         need(self.max_drift_per_metre >= 0 and self.max_drift_floor_m >= 0, "max_drift_per_metre",

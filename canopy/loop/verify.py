@@ -8,8 +8,9 @@ to 1):
    have stereo depth, within a vocabulary node when a vocabulary gives one (DBoW2's
    direct index, what ORB-SLAM's SearchByBoW does), otherwise brute force with Lowe's
    ratio test;
-2. EPnP in RANSAC: candidate stereo points (in the candidate camera) against the query
-   pixels, giving T_query_cand;
+2. RANSAC for T_query_cand: three matched stereo points per hypothesis in closed form,
+   scored by reprojecting the candidate points into the query image
+   (``canopy.loop.rigid_ransac``; or EPnP on candidate points against query pixels);
 3. guided search: every candidate stereo point projected with that pose and matched in a
    small window (ORB-SLAM SearchByProjection), then motion-only refinement on the
    query's stereo measurements (AGRI Eq. 9 with Huber, re-classification of outliers);
@@ -30,6 +31,7 @@ from canopy.frontend.matching import as_words, best_two, hamming_pairs, knn_matc
 from canopy.frontend.pose import refine_pose
 from canopy.loop.keyframe import PlaceKeyframe
 from canopy.loop.params import LoopParams
+from canopy.loop.rigid_ransac import rigid_ransac
 from shared.types import StereoCalibration
 
 
@@ -124,8 +126,15 @@ def verify_candidate(query: PlaceKeyframe, cand: PlaceKeyframe, calib: StereoCal
     n_matches = len(qi)
     if n_matches < params.min_matches:
         return Verification(None, f"{n_matches} descriptor matches < {params.min_matches}", n_matches)
-    # 2. EPnP RANSAC: candidate camera points -> query pixels
-    T_qc, mask = _pnp_ransac(X_c[cj], query.uv[qi], calib.K, params, seed=query.index * 7919 + cand.index)
+    # 2. RANSAC: candidate camera points -> query pixels
+    seed = query.index * 7919 + cand.index
+    X_q = query.points_cam(calib)[qi]
+    # three-point rigid hypotheses need stereo on the query side too (a monocular query goes to EPnP)
+    if params.verify_ransac == "rigid" and np.isfinite(X_q[:, 2]).sum() >= 3:
+        T_qc, mask = rigid_ransac(X_c[cj], X_q, query.uv[qi], calib.K, params.pnp_reprojection_error,
+                                  params.pnp_iterations, params.pnp_confidence, seed)
+    else:
+        T_qc, mask = _pnp_ransac(X_c[cj], query.uv[qi], calib.K, params, seed=seed)
     if T_qc is None or mask.sum() < params.min_pnp_inliers:
         return Verification(None, f"PnP RANSAC: {int(mask.sum())} inliers < {params.min_pnp_inliers}", n_matches,
                             int(mask.sum()))
