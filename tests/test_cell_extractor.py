@@ -219,3 +219,56 @@ def test_descriptors_equal_cv2_orbs_on_its_own_keypoints(kitti_pair, kitti_param
         out, d = ex._orb.compute(pyr[lvl], ours)
         assert [k.class_id for k in out] == idx
         np.testing.assert_array_equal(d, desc[idx])
+
+
+def fallback_by_row_spans(ex: CellExtractor, img: np.ndarray, high: int, low: int):
+    """Written-out reference for detect_level: FAST at ``high`` over the region, then at ``low`` one
+    call per cell row on a view from its first to its last empty cell (3 px border), corners kept in
+    the empty cells. Returns (x, y, score) and the number of rows whose span holds a non-empty cell."""
+    h, w = img.shape
+    b, cs = ex.border, ex.params.cell_size
+    x0, y0, x1, y1 = b, b, w - b, h - b
+    ncol, nrow = max(1, (x1 - x0) // cs), max(1, (y1 - y0) // cs)
+    cw, ch = int(np.ceil((x1 - x0) / ncol)), int(np.ceil((y1 - y0) / nrow))
+
+    def fast(t, ya, yb, xa, xb):
+        kps = cv2.FastFeatureDetector_create(t, True).detect(img[ya - 3:yb + 3, xa - 3:xb + 3])
+        pts = np.array([k.pt for k in kps], np.int64).reshape(-1, 2) + (xa - 3, ya - 3)
+        return pts, np.array([k.response for k in kps], np.float32)
+
+    pts, score = fast(high, y0, y1, x0, x1)
+    cell = np.minimum((pts[:, 1] - y0) // ch, nrow - 1) * ncol + np.minimum((pts[:, 0] - x0) // cw, ncol - 1)
+    empty = (np.bincount(cell, minlength=nrow * ncol) == 0).reshape(nrow, ncol)
+    out_p, out_s, gapped = [pts], [score], 0
+    for r in range(nrow):
+        cols = np.flatnonzero(empty[r])
+        if len(cols) == 0:
+            continue
+        gapped += int(cols[-1] - cols[0] + 1 > len(cols))
+        ya, yb = y0 + r * ch, (y0 + (r + 1) * ch if r < nrow - 1 else y1)
+        xa, xb = x0 + cols[0] * cw, (x0 + (cols[-1] + 1) * cw if cols[-1] < ncol - 1 else x1)
+        q, sq = fast(low, ya, yb, xa, xb)
+        ok = empty[r, np.minimum((q[:, 0] - x0) // cw, ncol - 1)]
+        out_p.append(q[ok])
+        out_s.append(sq[ok])
+    p = np.concatenate(out_p)
+    return p[:, 0], p[:, 1], np.concatenate(out_s), gapped
+
+
+def test_fallback_on_runs_of_empty_cells_equals_fast_over_row_spans(kitti_pair, kitti_params):
+    """FAST runs only on runs of adjacent empty cells (1 px into the non-empty neighbours): the same
+    corners, scores and order as one call per cell row spanning its empty cells."""
+    left, right, _ = kitti_pair
+    rng = np.random.default_rng(1)
+    noisy = np.clip(low_contrast_image() + rng.normal(0, 3, (240, 480)), 0, 255).astype(np.uint8)
+    ex = CellExtractor(replace(kitti_params, extractor="cells"))
+    gapped_total = 0
+    for img in (left, right, noisy):
+        for level in ex.pyramid(img):
+            x, y, score, _ = ex.detect_level(level, 20, 7)
+            rx, ry, rscore, gapped = fallback_by_row_spans(ex, level, 20, 7)
+            gapped_total += gapped
+            np.testing.assert_array_equal(x, rx)
+            np.testing.assert_array_equal(y, ry)
+            np.testing.assert_array_equal(score, rscore)
+    assert gapped_total > 20  # many rows had non-empty cells between their empty ones
