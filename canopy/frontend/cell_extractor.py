@@ -167,7 +167,9 @@ def quadtree_select(x: np.ndarray, y: np.ndarray, score: np.ndarray, x0: float, 
     # every parent node keeps its best (they are fewer than the quota), the rest by score: ORB-SLAM
     # splits the most populated nodes last in its final round, which ends at the quota
     parent_best = _best_per_key(prev_key, rank) if prev_key is not None else np.zeros(0, np.int64)
-    rest = np.setdiff1d(winners, parent_best, assume_unique=True)
+    is_parent_best = np.zeros(n, bool)   # a parent's best is its child's best too: a subset of winners
+    is_parent_best[parent_best] = True
+    rest = winners[~is_parent_best[winners]]
     rest = rest[np.argsort(rank[rest], kind="stable")[: quota - len(parent_best)]]
     return np.sort(np.concatenate([parent_best, rest]))
 
@@ -178,12 +180,13 @@ def _node_keys(rx: np.ndarray, ry: np.ndarray, n_root: int, depth: int) -> np.nd
 
 
 def _best_per_key(key: np.ndarray, rank: np.ndarray) -> np.ndarray:
-    """Index of the best-ranked point of every key."""
-    order = np.argsort(key * len(rank) + rank)
-    ks = key[order]
-    first = np.ones(len(ks), bool)
-    first[1:] = ks[1:] != ks[:-1]
-    return np.sort(order[first])
+    """Index of the best-ranked point of every key (``rank``: a permutation, 0 = best), sorted.
+    The smallest rank per key by ``np.minimum.at`` over a table of the keys: no sort of all points."""
+    best = np.full(int(key.max()) + 1, len(rank), np.int64)
+    np.minimum.at(best, key, rank)
+    by_rank = np.empty_like(rank)
+    by_rank[rank] = np.arange(len(rank))
+    return np.sort(by_rank[best[best < len(rank)]])
 
 
 class CellExtractor:
