@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from canopy.config import load_run_config
-from canopy.frontend.cell_extractor import (CellExtractor, _best_per_key, harris_responses, ic_angles, level_quotas, make_extractor,
-                                            quadtree_select)
+from canopy.frontend.cell_extractor import (CellExtractor, _best_per_key, harris_responses, ic_angles, level_quotas,
+                                            make_extractor, quadtree_select)
 from canopy.frontend.features import OrbExtractor
 from canopy.frontend.params import TrackingParams
 from canopy.frontend.stereo import match_stereo

@@ -256,7 +256,7 @@ class CellExtractor:
         yb = np.where(rows < nrow - 1, y0 + (rows + 1) * ch, y1)
         xa = x0 + c_start * cw
         xb = np.where(c_end < ncol, x0 + c_end * cw, x1)
-        va = xa - FAST_BORDER - (~first)                # 1 px into the neighbouring non-empty cell
+        va = xa - FAST_BORDER - (~first)      # 1 px into the neighbouring non-empty cell
         vb = xb + FAST_BORDER + (~last)
         self._fast.setThreshold(low)
         kps, counts = [], []
