@@ -280,3 +280,25 @@ def test_fallback_on_runs_of_empty_cells_equals_fast_over_row_spans(kitti_pair, 
             np.testing.assert_array_equal(y, ry)
             np.testing.assert_array_equal(score, rscore)
     assert gapped_total > 20  # many rows had non-empty cells between their empty ones
+
+
+def test_keypoints_opencv_drops_at_the_border_leave_the_rest_aligned(kitti_pair, kitti_params):
+    """When cv2.ORB.compute drops keypoints (here: its border is wider than the extractor's), every
+    remaining keypoint keeps its own descriptor and response."""
+    left, _, _ = kitti_pair
+    p = replace(kitti_params, extractor="cells", edge_threshold=40)
+    ex = CellExtractor(p)
+    ex.border = 19                                # detect closer to the edge than ORB describes
+    f = ex.extract(left)
+    lvl0 = f.octave == 0
+    x, y = f.uv[lvl0, 0].astype(np.int64), f.uv[lvl0, 1].astype(np.int64)
+    h, w = left.shape
+    assert lvl0.sum() < ex.quotas[0]              # some were dropped ...
+    assert np.all((x >= 40) & (x < w - 40) & (y >= 40) & (y < h - 40))  # ... those inside ORB's border
+    kps = cv2.KeyPoint_convert(np.column_stack([x, y]).astype(np.float32), 31.0)
+    for k, a in zip(kps, ic_angles(left, x, y).tolist()):
+        k.angle = a
+    orb = cv2.ORB_create(nlevels=1, edgeThreshold=40, patchSize=31)
+    _, d = orb.compute(left, kps)
+    np.testing.assert_array_equal(f.descriptors[lvl0], d)
+    np.testing.assert_array_equal(f.response[lvl0], harris_responses(left, x, y))

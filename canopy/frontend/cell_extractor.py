@@ -347,14 +347,14 @@ class CellExtractor:
             angles = ic_angles(level, x, y)
             kps = cv2.KeyPoint_convert(np.column_stack([x, y]).astype(np.float32), float(self.params.patch_size),
                                        1.0, 0, -1)
-            for i, (k, a) in enumerate(zip(kps, angles.tolist())):
+            for k, a in zip(kps, angles.tolist()):
                 k.angle = a
-                k.class_id = i
             kps, d = self._orb.compute(level, kps)
             if d is None or len(kps) == 0:
                 continue
-            if len(kps) != len(x):  # OpenCV dropped some (border): map back by class_id
-                idx = np.array([k.class_id for k in kps], np.int64)
+            if len(kps) != len(x):  # OpenCV dropped some (border; it keeps the others' order): by position
+                kept = np.asarray(cv2.KeyPoint_convert(kps), np.float32).reshape(-1, 2).astype(np.int64)
+                idx = np.flatnonzero(np.isin(y * level.shape[1] + x, kept[:, 1] * level.shape[1] + kept[:, 0]))
                 x, y, harris = x[idx], y[idx], harris[idx]
             s = float(self.scale_factors[lvl])
             uv.append(np.column_stack([x, y]).astype(np.float32) * s)
