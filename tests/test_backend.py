@@ -157,3 +157,16 @@ def test_schur_solver_sums_repeated_observations():
     assert np.abs(once[0] - T_true[order]).max() < 1e-6
     assert np.abs(twice[0] - once[0]).max() < 1e-8
     assert np.abs(twice[1] - X).max() < 1e-6
+
+
+def test_local_map_ids_are_the_sorted_distinct_landmarks_of_the_window():
+    from canopy.backend.map_store import _sorted_unique_ids
+
+    rng = np.random.default_rng(4)
+    dense = rng.integers(-1, 5000, 36000)          # keypoint slots: -1 (no landmark) or an id
+    sparse = np.array([-1, 7, 10 ** 12, 7, 3, -1, 10 ** 12], np.int64)   # a loaded map's far-apart ids
+    for ids in (dense, sparse, np.full(5, -1), np.zeros(0, np.int64)):
+        ref = np.unique(ids[ids >= 0]).astype(np.int64)
+        out = _sorted_unique_ids(ids)
+        assert out.dtype == np.int64
+        np.testing.assert_array_equal(out, ref)

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from canopy.config import load_run_config
-from canopy.frontend.cell_extractor import (CellExtractor, harris_responses, ic_angles, level_quotas, make_extractor,
-                                            quadtree_select)
+from canopy.frontend.cell_extractor import (CellExtractor, _best_per_key, harris_responses, ic_angles, level_quotas,
+                                            make_extractor, quadtree_select)
 from canopy.frontend.features import OrbExtractor
 from canopy.frontend.params import TrackingParams
 from canopy.frontend.stereo import match_stereo
@@ -146,6 +146,14 @@ def test_quadtree_select_spreads_to_the_quota():
     assert len(quadtree_select(x[:10], y[:10], score[:10], 0, 0, 400, 200, 60)) == 10
 
 
+def test_best_per_key_keeps_the_best_ranked_point_of_every_key():
+    rng = np.random.default_rng(3)
+    key = rng.integers(0, 50, 400) * 7            # sparse keys, most repeated
+    rank = rng.permutation(400)
+    ref = sorted(min(np.flatnonzero(key == k), key=lambda i: rank[i]) for k in np.unique(key))
+    np.testing.assert_array_equal(_best_per_key(key, rank), ref)
+
+
 @pytest.mark.parametrize("ranking, share", [("harris2x", 0.95), ("fast", 0.8)])
 def test_cell_descriptors_stereo_match_about_as_many_as_opencv(kitti_params, ranking, share):
     """Stereo matches on KITTI pairs 0, 20, 40 against cv2.ORB + grid bucketing. Measured:
@@ -219,3 +227,78 @@ def test_descriptors_equal_cv2_orbs_on_its_own_keypoints(kitti_pair, kitti_param
         out, d = ex._orb.compute(pyr[lvl], ours)
         assert [k.class_id for k in out] == idx
         np.testing.assert_array_equal(d, desc[idx])
+
+
+def fallback_by_row_spans(ex: CellExtractor, img: np.ndarray, high: int, low: int):
+    """Written-out reference for detect_level: FAST at ``high`` over the region, then at ``low`` one
+    call per cell row on a view from its first to its last empty cell (3 px border), corners kept in
+    the empty cells. Returns (x, y, score) and the number of rows whose span holds a non-empty cell."""
+    h, w = img.shape
+    b, cs = ex.border, ex.params.cell_size
+    x0, y0, x1, y1 = b, b, w - b, h - b
+    ncol, nrow = max(1, (x1 - x0) // cs), max(1, (y1 - y0) // cs)
+    cw, ch = int(np.ceil((x1 - x0) / ncol)), int(np.ceil((y1 - y0) / nrow))
+
+    def fast(t, ya, yb, xa, xb):
+        kps = cv2.FastFeatureDetector_create(t, True).detect(img[ya - 3:yb + 3, xa - 3:xb + 3])
+        pts = np.array([k.pt for k in kps], np.int64).reshape(-1, 2) + (xa - 3, ya - 3)
+        return pts, np.array([k.response for k in kps], np.float32)
+
+    pts, score = fast(high, y0, y1, x0, x1)
+    cell = np.minimum((pts[:, 1] - y0) // ch, nrow - 1) * ncol + np.minimum((pts[:, 0] - x0) // cw, ncol - 1)
+    empty = (np.bincount(cell, minlength=nrow * ncol) == 0).reshape(nrow, ncol)
+    out_p, out_s, gapped = [pts], [score], 0
+    for r in range(nrow):
+        cols = np.flatnonzero(empty[r])
+        if len(cols) == 0:
+            continue
+        gapped += int(cols[-1] - cols[0] + 1 > len(cols))
+        ya, yb = y0 + r * ch, (y0 + (r + 1) * ch if r < nrow - 1 else y1)
+        xa, xb = x0 + cols[0] * cw, (x0 + (cols[-1] + 1) * cw if cols[-1] < ncol - 1 else x1)
+        q, sq = fast(low, ya, yb, xa, xb)
+        ok = empty[r, np.minimum((q[:, 0] - x0) // cw, ncol - 1)]
+        out_p.append(q[ok])
+        out_s.append(sq[ok])
+    p = np.concatenate(out_p)
+    return p[:, 0], p[:, 1], np.concatenate(out_s), gapped
+
+
+def test_fallback_on_runs_of_empty_cells_equals_fast_over_row_spans(kitti_pair, kitti_params):
+    """FAST runs only on runs of adjacent empty cells (1 px into the non-empty neighbours): the same
+    corners, scores and order as one call per cell row spanning its empty cells."""
+    left, right, _ = kitti_pair
+    rng = np.random.default_rng(1)
+    noisy = np.clip(low_contrast_image() + rng.normal(0, 3, (240, 480)), 0, 255).astype(np.uint8)
+    ex = CellExtractor(replace(kitti_params, extractor="cells"))
+    gapped_total = 0
+    for img in (left, right, noisy):
+        for level in ex.pyramid(img):
+            x, y, score, _ = ex.detect_level(level, 20, 7)
+            rx, ry, rscore, gapped = fallback_by_row_spans(ex, level, 20, 7)
+            gapped_total += gapped
+            np.testing.assert_array_equal(x, rx)
+            np.testing.assert_array_equal(y, ry)
+            np.testing.assert_array_equal(score, rscore)
+    assert gapped_total > 20  # many rows had non-empty cells between their empty ones
+
+
+def test_keypoints_opencv_drops_at_the_border_leave_the_rest_aligned(kitti_pair, kitti_params):
+    """When cv2.ORB.compute drops keypoints (here: its border is wider than the extractor's), every
+    remaining keypoint keeps its own descriptor and response."""
+    left, _, _ = kitti_pair
+    p = replace(kitti_params, extractor="cells", edge_threshold=40)
+    ex = CellExtractor(p)
+    ex.border = 19                                # detect closer to the edge than ORB describes
+    f = ex.extract(left)
+    lvl0 = f.octave == 0
+    x, y = f.uv[lvl0, 0].astype(np.int64), f.uv[lvl0, 1].astype(np.int64)
+    h, w = left.shape
+    assert lvl0.sum() < ex.quotas[0]              # some were dropped ...
+    assert np.all((x >= 40) & (x < w - 40) & (y >= 40) & (y < h - 40))  # ... those inside ORB's border
+    kps = cv2.KeyPoint_convert(np.column_stack([x, y]).astype(np.float32), 31.0)
+    for k, a in zip(kps, ic_angles(left, x, y).tolist()):
+        k.angle = a
+    orb = cv2.ORB_create(nlevels=1, edgeThreshold=40, patchSize=31)
+    _, d = orb.compute(left, kps)
+    np.testing.assert_array_equal(f.descriptors[lvl0], d)
+    np.testing.assert_array_equal(f.response[lvl0], harris_responses(left, x, y))

@@ -44,15 +44,16 @@ class LocalBundleAdjustmentMixin:
         lines = self._line_edges(local, kf_set) if p.use_lines else None
         if not lm_ids and (lines is None or len(lines[0]) == 0):
             return
-        uv = np.empty((len(e_kf), 2))
-        ur = np.empty(len(e_kf))
-        octv = np.empty(len(e_kf), np.int64)
-        for k in np.unique(e_kf).tolist():
-            m = e_kf == k
-            kf = self.keyframes[k]
-            uv[m] = kf.uv[e_kp[m]]
-            ur[m] = kf.u_right[e_kp[m]]
-            octv[m] = kf.octave[e_kp[m]]
+        # every edge's keypoint by one gather from the window keyframes' arrays laid end to end
+        # (one masked gather per keyframe cost ~2 ms per KITTI keyframe)
+        kf_ids = np.unique(e_kf)
+        kfs = [self.keyframes[k] for k in kf_ids.tolist()]
+        start = np.cumsum([0] + [len(kf.uv) for kf in kfs])[:-1]
+        row = start[np.searchsorted(kf_ids, e_kf)] + e_kp
+        uv = np.concatenate([kf.uv for kf in kfs]).astype(float, copy=False)[row] if kfs else np.empty((0, 2))
+        ur = np.concatenate([kf.u_right for kf in kfs]).astype(float, copy=False)[row] if kfs else np.empty(0)
+        octv = np.concatenate([kf.octave for kf in kfs]).astype(np.int64, copy=False)[row] if kfs else \
+            np.empty(0, np.int64)
         stereo = ur >= 0
         active = np.ones(len(e_kf), bool)
         if lines is None and p.ba_solver == "schur":

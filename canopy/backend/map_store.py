@@ -56,6 +56,22 @@ class LineLandmark:
     segment: int = 0
 
 
+def _sorted_unique_ids(ids: np.ndarray) -> np.ndarray:
+    """Sorted distinct non-negative ids (what ``np.unique`` gives, -1 = none dropped). Landmark
+    ids are a dense counter, so a presence table is ~10x cheaper than sorting the window's
+    ~36 k keypoint slots (KITTI: 2 -> 0.2 ms per keyframe); sparse ids fall back to np.unique."""
+    ids = np.asarray(ids, np.int64)
+    ids = ids[ids >= 0]
+    if len(ids) == 0:
+        return ids
+    top = int(ids.max())
+    if top > 64 * len(ids) + 4096:
+        return np.unique(ids)
+    present = np.zeros(top + 1, bool)
+    present[ids] = True
+    return np.flatnonzero(present).astype(np.int64)
+
+
 def local_map_update(index: int, keyframes: dict, landmarks: dict, local: list[int], fixed: list[int]):
     """The local map tracking needs after keyframe ``index``: the landmarks seen by the local and
     fixed keyframes (ids, positions, descriptors) and the refined poses of the local ones. Shared
@@ -63,8 +79,7 @@ def local_map_update(index: int, keyframes: dict, landmarks: dict, local: list[i
     from canopy.frontend.messages import LocalMapUpdate
 
     seen = [keyframes[k].landmark for k in list(local) + list(fixed)]
-    ids = np.unique(np.concatenate(seen)) if seen else np.zeros(0, np.int64)
-    ids = ids[ids >= 0].astype(np.int64)
+    ids = _sorted_unique_ids(np.concatenate(seen)) if seen else np.zeros(0, np.int64)
     lms = [landmarks[i] for i in ids.tolist()]
     # one concatenate of the small arrays (1.5x faster than np.array over a list of arrays)
     pos = np.concatenate([lm.position for lm in lms]).astype(float).reshape(-1, 3) if lms else np.zeros((0, 3))

@@ -82,6 +82,9 @@ def subpixel_refine(left_img: np.ndarray, right_img: np.ndarray, uvl: np.ndarray
     # |differences| are <= 510: a patch's SAD fits 16 bits unsigned up to 128 pixels (11x11), and
     # 16-bit sums run ~1.6x faster than 32-bit ones; larger windows sum in 32 bits
     sum_type = np.uint16 if (2 * w + 1) ** 2 * 510 < 1 << 16 else np.int32
+    # patches of every level gathered first, then one SAD pass over all of them: each row's
+    # arithmetic is the same, and one pass instead of one per level saves ~8x the numpy calls
+    parts = []
     for lvl in levels:
         sel = np.flatnonzero(octave == lvl)
         s = scale_factors[lvl]
@@ -96,35 +99,41 @@ def subpixel_refine(left_img: np.ndarray, right_img: np.ndarray, uvl: np.ndarray
         if len(sel) == 0:
             continue
         rows = (yl[:, None] + dw[None, :])[:, :, None]                       # (K,P,1)
-        # int16 differences of uint8 pixels, one window shift at a time: the (K,P,P) temporaries
-        # stay in cache (20x faster than one (K,P,2L+1,P) float array; identical sums)
         patch_l = il[rows, (xl[:, None] + dw[None, :])[:, None, :]].astype(np.int16)
         band = ir[rows, (xr0[:, None] + strip[None, :])[:, None, :]].astype(np.int16)  # (K,P,2L+2w+1)
-        if normalise == "mean":
-            sad = _zero_mean_sad(patch_l, band, 2 * L + 1)
-        else:
-            patch_l -= patch_l[:, w:w + 1, w:w + 1]
-            sad = np.empty((len(sel), 2 * L + 1), np.float64)
-            diff = np.empty(patch_l.shape, np.int16)  # one buffer for every shift (no temporaries)
-            for shift in range(2 * L + 1):
-                # window at this shift minus its centre pixel, minus the centred left patch
-                np.subtract(band[:, :, shift:shift + 2 * w + 1], patch_l, out=diff)
-                diff -= band[:, w:w + 1, shift + w:shift + w + 1]
-                np.abs(diff, out=diff)
-                sad[:, shift] = diff.reshape(len(sel), -1).view(sum_type).sum(axis=1, dtype=sum_type)
-        best = np.argmin(sad, axis=1)
-        interior = (best > 0) & (best < 2 * L)
-        idx = np.arange(len(sel))
-        b = np.clip(best, 1, 2 * L - 1)
-        d1, d2, d3 = sad[idx, b - 1], sad[idx, b], sad[idx, b + 1]
-        denom = 2.0 * (d1 + d3 - 2.0 * d2)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            delta = np.where(denom > 0, (d1 - d3) / denom, 0.0)
-        delta = np.where(interior, delta, 0.0)  # no parabola at the window's edge (ORB-SLAM2: rejected)
-        good = interior & (np.abs(delta) <= 1.0)
-        u_out[sel] = s * (xr0 + (best - L) + delta)
-        sad_out[sel] = sad[idx, best]
-        ok_out[sel] = good
+        parts.append((sel, xr0, np.full(len(sel), s), patch_l, band))
+    if not parts:
+        return u_out, sad_out, ok_out
+    sel, xr0, s = (np.concatenate([part[i] for part in parts]) for i in range(3))
+    patch_l = np.concatenate([part[3] for part in parts])
+    band = np.concatenate([part[4] for part in parts])
+    if normalise == "mean":
+        sad = _zero_mean_sad(patch_l, band, 2 * L + 1)
+    else:
+        patch_l -= patch_l[:, w:w + 1, w:w + 1]
+        sad = np.empty((len(sel), 2 * L + 1), np.float64)
+        # int16 differences of uint8 pixels, one window shift at a time: the (K,P,P) temporaries
+        # stay small (20x faster than one (K,P,2L+1,P) float array; identical sums)
+        diff = np.empty(patch_l.shape, np.int16)  # one buffer for every shift (no temporaries)
+        for shift in range(2 * L + 1):
+            # window at this shift minus its centre pixel, minus the centred left patch
+            np.subtract(band[:, :, shift:shift + 2 * w + 1], patch_l, out=diff)
+            diff -= band[:, w:w + 1, shift + w:shift + w + 1]
+            np.abs(diff, out=diff)
+            sad[:, shift] = diff.reshape(len(sel), -1).view(sum_type).sum(axis=1, dtype=sum_type)
+    best = np.argmin(sad, axis=1)
+    interior = (best > 0) & (best < 2 * L)
+    idx = np.arange(len(sel))
+    b = np.clip(best, 1, 2 * L - 1)
+    d1, d2, d3 = sad[idx, b - 1], sad[idx, b], sad[idx, b + 1]
+    denom = 2.0 * (d1 + d3 - 2.0 * d2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        delta = np.where(denom > 0, (d1 - d3) / denom, 0.0)
+    delta = np.where(interior, delta, 0.0)  # no parabola at the window's edge (ORB-SLAM2: rejected)
+    good = interior & (np.abs(delta) <= 1.0)
+    u_out[sel] = s * (xr0 + (best - L) + delta)
+    sad_out[sel] = sad[idx, best]
+    ok_out[sel] = good
     return u_out, sad_out, ok_out
 
 
