@@ -88,7 +88,9 @@ def run_canopy_in_process(dataset: str, path: Path, clean_path: Path, method: st
     config, kind = ("synthetic", "euroc") if dataset in PRESETS else (dataset, dataset)
     enh_sets = {"method": method, **{f: v for s, f, v in settings if s == "enhancement"}}
     track_sets = {f: v for s, f, v in settings if s == "tracking"}
-    out, rows = run(path, clean_path, config, enh_sets, track_sets, max_frames, stereo=False, kind=kind)
+    map_sets = {f: v for s, f, v in settings if s == "mapping"}
+    out, rows = run(path, clean_path, config, enh_sets, track_sets, max_frames, stereo=False, kind=kind,
+                    map_sets=map_sets)
     decisions: dict[str, int] = {}
     for r in rows:
         decisions[r["method"]] = decisions.get(r["method"], 0) + 1
@@ -304,7 +306,7 @@ def main(argv=None) -> int:
                          "on a machine too loaded for the actors' timeouts")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--set", dest="settings", action="append", default=[], metavar="SECTION.FIELD=VALUE",
-                    help="override a tracking / enhancement setting of the dataset's config for Canopy's runs "
+                    help="override a tracking / enhancement / mapping setting of the dataset's config for Canopy's runs "
                          "(with --in-process; repeatable), e.g. --set tracking.extractor=opencv")
     ap.add_argument("--cells-cache", default=None, metavar="DIR",
                     help="keep the degraded copies in DIR and reuse them (e.g. $CANOPY_CACHE_DIR/degraded)")
@@ -315,8 +317,9 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     settings = [parse_setting(text) for text in args.settings]
     for section, field, _ in settings:
-        if section not in ("tracking", "enhancement"):
-            raise SystemExit(f"bench_degrade_grid: --set {section}.{field}: only tracking.* and enhancement.* settings")
+        if section not in ("tracking", "enhancement", "mapping"):
+            raise SystemExit(f"bench_degrade_grid: --set {section}.{field}: only tracking.*, enhancement.* and "
+                             "mapping.* settings")
     if settings:  # unknown fields and bad values fail here, named, before any run
         try:
             with_settings(load_run_config("kitti"), settings)

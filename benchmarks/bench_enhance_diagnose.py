@@ -84,8 +84,9 @@ def stereo_errors(tracker, frame, kwargs, ref_disp):
 
 
 def run(path, clean_path, dataset, enh_sets, track_sets, max_frames=None, per_frame=False, stereo=True,
-        fast_rule="actor", kind=None):
-    """``dataset``: the config (configs/<dataset>.yaml); ``kind``: the source layout (default ``dataset``)."""
+        fast_rule="actor", kind=None, map_sets=None):
+    """``dataset``: the config (configs/<dataset>.yaml); ``kind``: the source layout (default ``dataset``);
+    ``map_sets``: mapping settings over the config's (e.g. ``{"window_size": 5}``)."""
     cfg = load_run_config(dataset)
     enh = replace(cfg.enhancement, **enh_sets)
     tp = replace(cfg.tracking, **track_sets)
@@ -93,7 +94,7 @@ def run(path, clean_path, dataset, enh_sets, track_sets, max_frames=None, per_fr
     clean = open_source(kind or dataset, clean_path, max_frames=max_frames)
     enhancer = make_enhancer(enh)
     tracker = Tracker(src.calibration, tp)
-    mapper = LocalMapper(src.calibration, cfg.mapping)
+    mapper = LocalMapper(src.calibration, replace(cfg.mapping, **(map_sets or {})))
     # map updates applied when the actors' lockstep applies them (runtime.map_update_lag_frames)
     schedule = MapUpdateSchedule(effective_map_update_lag(cfg.runtime.map_update_lag_frames, tp, cfg.runtime.sensor))
     rows, poses, rel, refs, statuses = [], [], [], [], []

@@ -97,6 +97,24 @@ def test_fallback_threshold_stays_above_twice_the_noise():
     assert CellExtractor(replace(p, extractor_enhanced="cells")).fallback_for(img, 3)[0] >= 2 * sigma
 
 
+def test_a_given_noise_sigma_is_used_instead_of_measuring_it_again():
+    """The tracker measures the left image's sigma for its FAST floor and hands it over: the
+    same sigma gives the same features; a different one is the one that sets the floor."""
+    rng = np.random.default_rng(0)
+    img = np.clip(low_contrast_image() + rng.normal(0, 8, (240, 480)), 0, 255).astype(np.uint8)
+    ex = CellExtractor(TrackingParams(n_features=500, n_levels=1, extractor="cells"))
+    own = ex.extract(img)
+    own_low = ex.last_stats["fast_low"]
+    given = ex.extract(img, noise_sigma=image_noise_sigma(img))
+    assert ex.last_stats["fast_low"] == own_low
+    for a, b in zip((own.uv, own.octave, own.response, own.descriptors),
+                    (given.uv, given.octave, given.response, given.descriptors)):
+        np.testing.assert_array_equal(a, b)
+    assert ex.fallback_for(img, None, noise_sigma=20.0) == (40, 20.0)
+    ex.extract(img, noise_sigma=20.0)
+    assert ex.last_stats["fast_low"] == 40 != own_low and ex.last_stats["noise_sigma"] == 20.0
+
+
 def test_orientation_matches_cv2_orb_on_its_own_keypoints(kitti_pair):
     left, _, _ = kitti_pair
     orb = cv2.ORB_create(1000, 1.2, 1, 19, 0, 2, cv2.ORB_HARRIS_SCORE, 31, 20)

@@ -198,3 +198,29 @@ def test_thread_schedstat_counts_this_threads_cpu():
     assert 0.18 <= rep["main"]["cpu_s"] <= 0.5
     assert rep["main"]["cpu_ms_per_frame"] == pytest.approx(rep["main"]["cpu_s"] * 1e3 / 4, rel=1e-3)
     assert rep["main"]["runqueue_wait_s"] >= 0
+
+
+@pytest.mark.parametrize("parallel", [False, True])
+def test_left_noise_sigma_is_measured_once_per_frame(kitti, monkeypatch, parallel):
+    """The tracker's FAST-floor sigma of the left image goes to the cell extractor's fallback floor
+    instead of being measured again: one measurement of the left image and one of the right per
+    frame (that the features do not change: test_cell_extractor's given-sigma test)."""
+    import canopy.frontend.cell_extractor as cell_extractor
+    import canopy.frontend.tracker as tracker_module
+    from canopy.frontend.track_health import image_noise_sigma
+
+    src, frames, cfg = kitti
+    params = replace(cfg.tracking, parallel_stereo=parallel)
+    assert params.extractor == "cells" and params.fast_noise_factor > 0 and params.cell_fallback_noise_factor > 0
+    measured = []
+
+    def counting(image):
+        measured.append(id(image))
+        return image_noise_sigma(image)
+
+    monkeypatch.setattr(tracker_module, "image_noise_sigma", counting)
+    monkeypatch.setattr(cell_extractor, "image_noise_sigma", counting)
+    tracker = Tracker(src.calibration, params)
+    res = tracker.track(frames[0])
+    assert res.status != "lost"
+    assert sorted(measured) == sorted([id(frames[0].left), id(frames[0].right)])

@@ -93,9 +93,11 @@ class OrbExtractor:
         self.scale_factors = params.scale_factor ** np.arange(params.n_levels)
 
     def extract(self, image: np.ndarray, fast_threshold: int | None = None,
-                fallback_threshold: int | None = None, min_keypoints: int = 0) -> Features:
+                fallback_threshold: int | None = None, min_keypoints: int = 0,
+                noise_sigma: float | None = None) -> Features:
         """``fallback_threshold``: AFE Eq. 19, retried when ``fast_threshold``
-        (Eq. 18) yields fewer than ``min_keypoints`` corners."""
+        (Eq. 18) yields fewer than ``min_keypoints`` corners. ``noise_sigma`` is unused (the
+        ``CellExtractor`` interface: cv2.ORB has no noise floor of its own)."""
         thr = self.params.fast_threshold if fast_threshold is None else int(fast_threshold)
         self._orb.setFastThreshold(thr)
         kps, desc = self._orb.detectAndCompute(image, None)

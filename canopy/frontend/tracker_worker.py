@@ -96,7 +96,7 @@ class TrackerFeaturesMixin:
             job = StereoJob(self._pool, self.extractor_right, frame, self.calib, self.params, self.scale_factors,
                             noise_sigma, fast)
             try:
-                left = self.extractor.extract(frame.left, *fast)
+                left = self.extractor.extract(frame.left, *fast, noise_sigma=noise_sigma)
             except BaseException as error:
                 job.left_failed(error)
                 raise
@@ -108,7 +108,8 @@ class TrackerFeaturesMixin:
         if self._pool is not None:
             right_job = self._pool.submit(self.extractor_right.extract, frame.right, *fast)
         line_job = self._submit_line_jobs(frame) if self._lines_on else None
-        left = self.extractor.extract(frame.left, *fast)
+        # the tracker's noise sigma is of frame.left: the cell extractor's fallback floor reuses it
+        left = self.extractor.extract(frame.left, *fast, noise_sigma=noise_sigma)
         right = right_job.result() if self._pool is not None else self.extractor_right.extract(frame.right, *fast)
         record_stage(timings, "orb", t0)
         t0 = stage_clock()
