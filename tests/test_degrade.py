@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from canopy.degrade import (DegradeParams, add_haze, darken, degrade_image, depth_from_stereo,
+from canopy.degrade import (DegradeParams, add_haze, darken, degrade_image, depth_from_rendered, depth_from_stereo,
                             fill_disparity_background, ray_length, transmission)
 from canopy.sources import open_source
 from shared.errors import ConfigError, InputError
@@ -115,6 +115,33 @@ def test_depth_from_stereo_recovers_a_plane():
     rays = ray_length(depth, calib)
     assert rays[100, 160] == pytest.approx(depth[100, 160], rel=1e-6)  # ray = z at the principal point
     assert np.all(rays >= depth - 1e-4)
+
+
+def test_depth_from_rendered_warps_the_left_depth_to_the_right_camera():
+    """A near box (2 m) in front of a wall (20 m) with sky above: the right camera sees the box
+    bf / 2 px further left, the wall it uncovers keeps the wall's depth, sky stays far."""
+    calib = StereoCalibration(fx=400.0, fy=400.0, cx=160.0, cy=100.0, baseline=0.2, width=320, height=200)
+    z = np.full((200, 320), 20.0)
+    z[:50] = 0.0                      # sky: the renderer writes 0
+    z[100:150, 150:200] = 2.0         # the box; its disparity bf / 2 = 40 px, the wall's 4 px
+    left = depth_from_rendered(z, calib, max_depth=100.0)
+    assert left[120, 160] == pytest.approx(2.0) and left[10, 10] == pytest.approx(100.0)
+    right = depth_from_rendered(z, calib, max_depth=100.0, view="right")
+    assert right[10, 100] == pytest.approx(100.0)                       # sky
+    assert np.allclose(right[100:150, 110:160], 2.0)                     # the box, 40 px left
+    assert np.allclose(right[100:150, 160:195], 20.0)                    # the wall behind it (occlusion filled far)
+    assert np.allclose(right[60:90, 20:300], 20.0)                       # the wall elsewhere
+    with pytest.raises(InputError, match="depth_left"):
+        depth_from_rendered(z[:10], calib)
+    with pytest.raises(ConfigError, match="view"):
+        depth_from_rendered(z, calib, view="up")
+
+
+def test_rendered_haze_depth_needs_a_generated_sequence(tmp_path):
+    with pytest.raises(ConfigError, match="haze-depth"):
+        degrade_sequence("kitti", tmp_path / "k", DegradeParams(mode="haze"), max_frames=1, haze_depth="rendered")
+    with pytest.raises(InputError, match="depth0"):  # the bundled EuRoC snippet has no rendered depth
+        degrade_sequence("euroc", tmp_path / "e", DegradeParams(mode="haze"), max_frames=1, haze_depth="rendered")
 
 
 def test_fill_disparity_takes_the_farther_neighbour():
