@@ -142,6 +142,7 @@ def test_rendered_haze_depth_needs_a_generated_sequence(tmp_path):
         degrade_sequence("kitti", tmp_path / "k", DegradeParams(mode="haze"), max_frames=1, haze_depth="rendered")
     with pytest.raises(InputError, match="depth0"):  # the bundled EuRoC snippet has no rendered depth
         degrade_sequence("euroc", tmp_path / "e", DegradeParams(mode="haze"), max_frames=1, haze_depth="rendered")
+    assert not (tmp_path / "e").exists()  # refused before writing anything
 
 
 def test_fill_disparity_takes_the_farther_neighbour():

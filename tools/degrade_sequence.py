@@ -193,8 +193,6 @@ def _degrade_euroc(src: EurocSource, out: Path, params: DegradeParams, log, haze
 
     inverses = None
     depth_dir = mav0_in / "depth0" / "data"
-    if params.haze and haze_depth == "rendered" and not depth_dir.is_dir():
-        raise InputError(depth_dir, "--haze-depth rendered needs the renderer's depth (mav0/depth0, generated sequences)")
     if params.haze:
         inverses, forward = _euroc_rectification(src)
         raw_l, raw_r = src.raw_pair(0)
@@ -254,6 +252,9 @@ def degrade_sequence(dataset: str, out: str | Path, params: DegradeParams, path:
         raise ConfigError("--haze-depth", f"must be 'stereo', or 'rendered' for a generated (euroc-layout) "
                                           f"sequence, got {haze_depth!r} for {dataset}")
     src = open_source(dataset, path, max_frames=max_frames)
+    depth_dir = src.left_paths[0].parents[2] / "depth0" / "data" if dataset == "euroc" else None
+    if params.haze and haze_depth == "rendered" and not depth_dir.is_dir():  # before anything is written
+        raise InputError(depth_dir, "--haze-depth rendered needs the renderer's depth (mav0/depth0, generated sequences)")
     out = Path(out)
     _prepare_out(out, src.root, force)
 
