@@ -144,7 +144,7 @@ def pair_preprocess():
 
 
 def degraded_cell(kind: str, dataset: str, clean_path: Path, cell, max_frames, workdir: Path,
-                  cells_cache: Path | None) -> tuple[Path, bool]:
+                  cells_cache: Path | None, haze_depth: str = "stereo") -> tuple[Path, bool]:
     """(folder of the degraded copy of ``dataset`` for ``cell``, whether it is a temporary one).
 
     With ``cells_cache`` the copy is kept there (named by dataset, frame count, cell and seed) and
@@ -152,10 +152,11 @@ def degraded_cell(kind: str, dataset: str, clean_path: Path, cell, max_frames, w
     ``auto`` columns run apart), instead of being written again and deleted."""
     if cells_cache is None:
         return degrade_sequence(kind, workdir / f"{dataset}_{cell.label}", cell, path=clean_path,
-                                max_frames=max_frames), True
-    out = cells_cache / f"{dataset}-{max_frames or 'all'}-{cell.label}-seed{cell.seed}"
+                                max_frames=max_frames, haze_depth=haze_depth), True
+    rendered = "-rendered" if haze_depth == "rendered" and cell.haze else ""  # never mixed up with SGBM-haze copies
+    out = cells_cache / f"{dataset}-{max_frames or 'all'}-{cell.label}-seed{cell.seed}{rendered}"
     if not (out / "DEGRADED.yaml").is_file():
-        degrade_sequence(kind, out, cell, path=clean_path, max_frames=max_frames, force=True)
+        degrade_sequence(kind, out, cell, path=clean_path, max_frames=max_frames, force=True, haze_depth=haze_depth)
     return out, False
 
 
@@ -308,6 +309,10 @@ def main(argv=None) -> int:
     ap.add_argument("--set", dest="settings", action="append", default=[], metavar="SECTION.FIELD=VALUE",
                     help="override a tracking / enhancement / mapping setting of the dataset's config for Canopy's runs "
                          "(with --in-process; repeatable), e.g. --set tracking.extractor=opencv")
+    ap.add_argument("--haze-depth", choices=("stereo", "rendered"), default="stereo",
+                    help="haze depth of the generated presets' cells: SGBM on the clean pair (default), or the "
+                         "renderer's exact depth (tools/degrade_sequence.py --haze-depth; dark-rows: "
+                         "docs/notes/s8-haze.md); KITTI / EuRoC always use SGBM")
     ap.add_argument("--cells-cache", default=None, metavar="DIR",
                     help="keep the degraded copies in DIR and reuse them (e.g. $CANOPY_CACHE_DIR/degraded)")
     ap.add_argument("--out-dir", default=str(ROOT / "docs" / "results"))
@@ -355,7 +360,8 @@ def main(argv=None) -> int:
                     path, label = clean_path, "clean"
                 else:
                     label = cell.label
-                    path, temporary = degraded_cell(kind, d, clean_path, cell, max_frames, tmp, cells_cache)
+                    haze_depth = "rendered" if args.haze_depth == "rendered" and d in PRESETS else "stereo"
+                    path, temporary = degraded_cell(kind, d, clean_path, cell, max_frames, tmp, cells_cache, haze_depth)
                 for m in args.methods:
                     r = run_canopy_in_process(d, path, clean_path, m, max_frames, settings) if args.in_process else \
                         run_canopy(d, path, m, max_frames, tmp / f"{d}_{label}", settings)
@@ -412,7 +418,8 @@ def main(argv=None) -> int:
     result = {"benchmark": "bench_degrade_grid", "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
               "quick": args.quick, "settings": list(args.settings), "datasets": list(datasets), "gains": list(gains), "betas": list(betas),
               "noise_levels": {n: {"full_well": NOISE_LEVELS[n][0], "read_noise": NOISE_LEVELS[n][1]} for n in noise},
-              "methods": list(args.methods), "orbslam3": {"available": orb is not None, "message": peer_msg},
+              "methods": list(args.methods), "haze_depth": args.haze_depth,
+              "orbslam3": {"available": orb is not None, "message": peer_msg},
               "criteria": {"ate_factor": ATE_FACTOR, "checks": checks}, "rows": rows}
     out_json = Path(args.out_dir) / "bench_degrade_grid.json"
     write_json(out_json, result)  # before the plots: a plotting failure must not lose the runs

@@ -305,6 +305,38 @@ def depth_from_stereo(left: np.ndarray, right: np.ndarray, calib: StereoCalibrat
     return np.minimum(depth, float(max_depth)).astype(np.float32)
 
 
+def depth_from_rendered(depth_left: np.ndarray, calib: StereoCalibration, max_depth: float = 200.0,
+                        view: str = "left") -> np.ndarray:
+    """Z-depth (float32 m) of the ``view`` camera from the left camera's exact rendered depth.
+
+    For generated sequences, whose renderer writes the left depth (``mav0/depth0``, 0 = sky): SGBM on
+    a *dark* clean pair (dark-rows, mean grey ~11) returns blocky depth with holes that differs
+    between the cameras, and haze painted with it is texture at the wrong disparity (s8-haze notes).
+    The right view is the left depth forward-warped by its disparity bf / z (the nearest surface
+    wins a pixel), its occlusion holes filled with the farther neighbour
+    (``fill_disparity_background``); sky and depths beyond ``max_depth`` become ``max_depth``, as
+    ``depth_from_stereo`` gives pixels without a disparity.
+    """
+    z = np.asarray(depth_left, dtype=np.float64)
+    if z.ndim != 2 or z.shape != (calib.height, calib.width):
+        raise InputError("depth_left", f"must be a {calib.height}x{calib.width} depth map, got shape {z.shape}")
+    z = np.where(z > 0, np.minimum(z, float(max_depth)), float(max_depth))  # sky (0) is far, not missing
+    disp = calib.bf / z
+    if view == "right":
+        h, w = z.shape
+        u_r = np.rint(np.arange(w)[None, :] - disp).astype(np.int64)
+        hit = (u_r >= 0) & (u_r < w)
+        rows = np.broadcast_to(np.arange(h)[:, None], (h, w))
+        warped = np.zeros((h, w))
+        np.maximum.at(warped, (rows[hit], u_r[hit]), disp[hit])  # the nearest surface (largest d) wins
+        disp = fill_disparity_background(warped)
+    elif view != "left":
+        raise ConfigError("view", f"must be 'left' or 'right', got {view!r}")
+    with np.errstate(divide="ignore"):
+        depth = np.where(disp > 0, calib.bf / np.maximum(disp, 1e-6), np.inf)
+    return np.minimum(depth, float(max_depth)).astype(np.float32)
+
+
 def fill_disparity_background(disp: np.ndarray) -> np.ndarray:
     """Fill invalid (≤ 0) disparities row by row with the smaller of the nearest valid ones.
 

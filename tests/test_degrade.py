@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from canopy.degrade import (DegradeParams, add_haze, darken, degrade_image, depth_from_stereo,
+from canopy.degrade import (DegradeParams, add_haze, darken, degrade_image, depth_from_rendered, depth_from_stereo,
                             fill_disparity_background, ray_length, transmission)
 from canopy.sources import open_source
 from shared.errors import ConfigError, InputError
@@ -117,6 +117,34 @@ def test_depth_from_stereo_recovers_a_plane():
     assert np.all(rays >= depth - 1e-4)
 
 
+def test_depth_from_rendered_warps_the_left_depth_to_the_right_camera():
+    """A near box (2 m) in front of a wall (20 m) with sky above: the right camera sees the box
+    bf / 2 px further left, the wall it uncovers keeps the wall's depth, sky stays far."""
+    calib = StereoCalibration(fx=400.0, fy=400.0, cx=160.0, cy=100.0, baseline=0.2, width=320, height=200)
+    z = np.full((200, 320), 20.0)
+    z[:50] = 0.0                      # sky: the renderer writes 0
+    z[100:150, 150:200] = 2.0         # the box; its disparity bf / 2 = 40 px, the wall's 4 px
+    left = depth_from_rendered(z, calib, max_depth=100.0)
+    assert left[120, 160] == pytest.approx(2.0) and left[10, 10] == pytest.approx(100.0)
+    right = depth_from_rendered(z, calib, max_depth=100.0, view="right")
+    assert right[10, 100] == pytest.approx(100.0)                       # sky
+    assert np.allclose(right[100:150, 110:160], 2.0)                     # the box, 40 px left
+    assert np.allclose(right[100:150, 160:195], 20.0)                    # the wall behind it (occlusion filled far)
+    assert np.allclose(right[60:90, 20:300], 20.0)                       # the wall elsewhere
+    with pytest.raises(InputError, match="depth_left"):
+        depth_from_rendered(z[:10], calib)
+    with pytest.raises(ConfigError, match="view"):
+        depth_from_rendered(z, calib, view="up")
+
+
+def test_rendered_haze_depth_needs_a_generated_sequence(tmp_path):
+    with pytest.raises(ConfigError, match="haze-depth"):
+        degrade_sequence("kitti", tmp_path / "k", DegradeParams(mode="haze"), max_frames=1, haze_depth="rendered")
+    with pytest.raises(InputError, match="depth0"):  # the bundled EuRoC snippet has no rendered depth
+        degrade_sequence("euroc", tmp_path / "e", DegradeParams(mode="haze"), max_frames=1, haze_depth="rendered")
+    assert not (tmp_path / "e").exists()  # refused before writing anything
+
+
 def test_fill_disparity_takes_the_farther_neighbour():
     disp = np.array([[0, 8, 0, 0, 3, 0], [0, 0, 0, 0, 0, 0]], np.float32)
     assert fill_disparity_background(disp).tolist() == [[8, 8, 3, 3, 3, 3], [0, 0, 0, 0, 0, 0]]
@@ -197,6 +225,32 @@ def test_degraded_euroc_copy_opens_unchanged(tmp_path):
     f, g = hazy.frame(0), clean.frame(0)
     assert np.percentile(f.left, 5) > np.percentile(g.left, 5) + 20
     assert f.left.std() < g.left.std()
+
+
+def test_rendered_haze_follows_the_exact_depth_in_both_cameras(tmp_path):
+    """--haze-depth rendered on a generated sequence: the haze each camera gets is the model's
+    I t + A (1 - t) with t from the renderer's depth (left) and its warp (right), so the
+    transmission read back from the hazy / clean pair matches exp(-beta * ray) of that depth."""
+    import cv2
+
+    from canopy.synthetic import generate_sequence
+
+    seq = generate_sequence("day-loop", tmp_path / "seq", n_frames=1, seed=3, workers=1, noise=False)
+    params = DegradeParams(mode="haze", beta=0.06, airlight=220.0, max_depth=200.0)
+    out = degrade_sequence("euroc", tmp_path / "hazy", params, path=seq, haze_depth="rendered")
+    clean, hazy = open_source("euroc", seq), open_source("euroc", out)
+    c, h = clean.frame(0), hazy.frame(0)
+    calib = clean.calibration
+    z = cv2.imread(str(seq / "mav0" / "depth0" / "data" / clean.left_paths[0].name), cv2.IMREAD_UNCHANGED) / 1000.0
+    for view, img_c, img_h in (("left", c.left, h.left), ("right", c.right, h.right)):
+        t_model = np.exp(-params.beta * ray_length(depth_from_rendered(z, calib, params.max_depth, view), calib))
+        I, J = img_h.astype(float), img_c.astype(float)
+        ok = (params.airlight - J > 60) & (t_model > 0.2)   # well-conditioned: t = (A - I) / (A - J)
+        ok[:, :8] = ok[:, -8:] = False                       # rectification borders
+        t_read = (params.airlight - I[ok]) / (params.airlight - J[ok])
+        assert ok.sum() > 1000
+        assert np.median(np.abs(t_read - t_model[ok])) < 0.02, view
+    assert "haze_depth: rendered" in (out / "DEGRADED.yaml").read_text()
 
 
 def test_tool_refuses_to_overwrite_its_input(tmp_path):

@@ -61,7 +61,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from canopy.degrade import (DEGRADE_MODES, NOISE_LEVELS, DegradeParams, degrade_image,  # noqa: E402
-                            depth_from_stereo, ray_length)
+                            depth_from_rendered, depth_from_stereo, ray_length)
 from canopy.sources import BUNDLED_DATA, open_source  # noqa: E402
 from canopy.sources.base import IMAGE_SUFFIXES, load_yaml_file, numbers  # noqa: E402
 from canopy.sources.euroc import EurocSource  # noqa: E402
@@ -167,7 +167,17 @@ def _euroc_rectification(src: EurocSource) -> tuple[list[_RawToRectified], list[
     return inverses, forward
 
 
-def _degrade_euroc(src: EurocSource, out: Path, params: DegradeParams, log) -> int:
+def _rendered_rays(depth_png: Path, forward_left, calib, params: DegradeParams) -> list[np.ndarray]:
+    """Ray length per rectified pixel of both cameras from the renderer's left depth (uint16 mm,
+    0 = sky), rectified as the source rectifies cam0 (nearest: depth must not blend across edges)."""
+    raw = cv2.imread(str(depth_png), cv2.IMREAD_UNCHANGED)
+    if raw is None or raw.dtype != np.uint16:
+        raise InputError(depth_png, "rendered depth: expected a uint16 PNG (mm)")
+    z = cv2.remap(raw, *forward_left, cv2.INTER_NEAREST).astype(np.float64) / 1000.0
+    return [ray_length(depth_from_rendered(z, calib, params.max_depth, view=v), calib) for v in ("left", "right")]
+
+
+def _degrade_euroc(src: EurocSource, out: Path, params: DegradeParams, log, haze_depth: str = "stereo") -> int:
     src_root = src.root
     mav0_in = src.left_paths[0].parents[2]
     mav0_rel = mav0_in.relative_to(src_root) if mav0_in != src_root else Path(".")
@@ -182,6 +192,7 @@ def _degrade_euroc(src: EurocSource, out: Path, params: DegradeParams, log) -> i
     shutil.copytree(src_root, out, ignore=ignore, dirs_exist_ok=True)
 
     inverses = None
+    depth_dir = mav0_in / "depth0" / "data"
     if params.haze:
         inverses, forward = _euroc_rectification(src)
         raw_l, raw_r = src.raw_pair(0)
@@ -199,9 +210,12 @@ def _degrade_euroc(src: EurocSource, out: Path, params: DegradeParams, log) -> i
         raw = src.raw_pair(i)
         rays = [None, None]
         if params.haze:
-            frame = src.frame(i)
-            rays = [inv.pull(r) for inv, r in zip(inverses, _ray_maps(frame.left, frame.right,
-                                                                      src.calibration, params))]
+            if haze_depth == "rendered":
+                maps = _rendered_rays(depth_dir / src.left_paths[i].name, forward[0], src.calibration, params)
+            else:
+                frame = src.frame(i)
+                maps = _ray_maps(frame.left, frame.right, src.calibration, params)
+            rays = [inv.pull(r) for inv, r in zip(inverses, maps)]
         for cam, path in enumerate((src.left_paths[i], src.right_paths[i])):
             img = degrade_image(raw[cam], params, rays[cam], _frame_rng(params.seed, i, cam))
             _write_png(out / mav0_rel / cam_dirs[cam] / "data" / path.name, img)
@@ -225,11 +239,22 @@ def _csv_name(line: str) -> str:
 # -- entry points ------------------------------------------------------------------------
 
 def degrade_sequence(dataset: str, out: str | Path, params: DegradeParams, path: str | Path | None = None,
-                     max_frames: int | None = None, force: bool = False, progress: bool = False) -> Path:
-    """Write the degraded copy of ``dataset`` at ``path`` (None: bundled) to ``out``; return ``out``."""
+                     max_frames: int | None = None, force: bool = False, progress: bool = False,
+                     haze_depth: str = "stereo") -> Path:
+    """Write the degraded copy of ``dataset`` at ``path`` (None: bundled) to ``out``; return ``out``.
+
+    ``haze_depth``: ``stereo`` (SGBM on the clean pair, any dataset) or ``rendered`` (the renderer's
+    exact left depth, ``mav0/depth0`` of a generated sequence; needed where the clean pair is too dark
+    for SGBM, e.g. dark-rows: docs/notes/s8-haze.md)."""
     if dataset not in ("euroc", "kitti"):
         raise ConfigError("--dataset", f"must be euroc or kitti, got {dataset!r}")
+    if haze_depth not in ("stereo", "rendered") or (haze_depth == "rendered" and dataset != "euroc"):
+        raise ConfigError("--haze-depth", f"must be 'stereo', or 'rendered' for a generated (euroc-layout) "
+                                          f"sequence, got {haze_depth!r} for {dataset}")
     src = open_source(dataset, path, max_frames=max_frames)
+    depth_dir = src.left_paths[0].parents[2] / "depth0" / "data" if dataset == "euroc" else None
+    if params.haze and haze_depth == "rendered" and not depth_dir.is_dir():  # before anything is written
+        raise InputError(depth_dir, "--haze-depth rendered needs the renderer's depth (mav0/depth0, generated sequences)")
     out = Path(out)
     _prepare_out(out, src.root, force)
 
@@ -237,11 +262,13 @@ def degrade_sequence(dataset: str, out: str | Path, params: DegradeParams, path:
         if progress:
             print(f"\r{dataset}: frame {i + 1}/{len(src)}", end="", file=sys.stderr, flush=True)
 
-    n = (_degrade_kitti if dataset == "kitti" else _degrade_euroc)(src, out, params, log)
+    n = _degrade_kitti(src, out, params, log) if dataset == "kitti" else _degrade_euroc(src, out, params, log, haze_depth)
     if progress:
         print(file=sys.stderr)
     record = {"input": str(src.root.resolve()), "dataset": dataset, "frames": n,
               "params": asdict(params), "tool": "tools/degrade_sequence.py", "model": "canopy.degrade"}
+    if params.haze:
+        record["haze_depth"] = haze_depth
     (out / "DEGRADED.yaml").write_text(yaml.safe_dump(record, sort_keys=False))
     return out
 
@@ -267,6 +294,8 @@ def main(argv=None) -> int:
     ap.add_argument("--num-disparities", type=int, default=d.num_disparities)
     ap.add_argument("--block-size", type=int, default=d.block_size)
     ap.add_argument("--seed", type=int, default=d.seed)
+    ap.add_argument("--haze-depth", choices=("stereo", "rendered"), default="stereo",
+                    help="haze depth: SGBM on the clean pair, or the renderer's depth (generated sequences)")
     ap.add_argument("--max-frames", type=int, default=None)
     ap.add_argument("--force", action="store_true", help="replace a non-empty output folder")
     args = ap.parse_args(argv)
@@ -278,7 +307,7 @@ def main(argv=None) -> int:
                                airlight=args.airlight, max_depth=args.max_depth,
                                num_disparities=args.num_disparities, block_size=args.block_size, seed=args.seed)
         out = degrade_sequence(args.dataset, args.out, params, path=args.path, max_frames=args.max_frames,
-                               force=args.force, progress=True)
+                               force=args.force, progress=True, haze_depth=args.haze_depth)
     except CanopyError as exc:
         print(f"degrade_sequence: error: {exc}", file=sys.stderr)
         return 2
