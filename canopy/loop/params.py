@@ -60,8 +60,10 @@ class LoopParams:
     # stereo depth in the keyframe (it initialised their landmark), but a contour point's disparity
     # is that of no 3D point. True: the loop closer drops that depth, so verification's PnP and
     # refinement use them neither as candidate 3D points nor as stereo measurements of the query
-    # (the refinement measured u_right -1 as a right-image column). docs/notes/s8-drift.md
-    verify_stereo_only: bool = True
+    # (the refinement measured u_right -1 as a right-image column). Off: on the day-loop with
+    # contour landmarks it halves the loop's matches (78 -> 37) for the same accuracy (loop pose
+    # 0.5 / 0.3 cm, ATE 0.0197 m both ways; docs/notes/s8-drift.md)
+    verify_stereo_only: bool = False
     # Odometry consistency (the idea of Kimera-RPGO's pairwise consistency check): a loop may
     # only correct what drift can have accumulated along the path between the two keyframes.
     # Orchard rows repeat (same trees every few metres), and a view of the next row or the
