@@ -319,3 +319,79 @@ def test_a_keyframe_added_during_the_full_ba_moves_with_its_spanning_tree_parent
         assert err < 0.03
     else:
         assert err > 0.1
+
+
+def _with_sliding_silhouettes(lap, share: float, slide_m: float, seed: int = 3):
+    """The lap's keyframes with ``share`` of the physical points turned into silhouette points, as
+    tracking.contour_landmarks leaves them: measured bearing-only (u_right -1) in every keyframe, and
+    no fixed 3D point: a T-junction on a rim is where the rim occludes the background, so each
+    keyframe sees it displaced (here by a keyframe-dependent offset of ``slide_m``)."""
+    from dataclasses import replace as dc_replace
+
+    rng = np.random.default_rng(seed)
+    X, sil = lap["X"], rng.random(len(lap["X"])) < share
+    kfs = {}
+    for k, kf in lap["keyframes"].items():
+        phys = kf.landmark_ids % 10000
+        m = sil[phys]
+        T_cw = se3_inv(lap["gt"][k])
+        Pc = (X[phys[m]] + slide_m * np.array([np.cos(0.7 * k), np.sin(0.7 * k), 0.5 * np.cos(1.3 * k)])) @ T_cw[:3, :3].T \
+            + T_cw[:3, 3]
+        uv, ur = kf.uv.copy(), kf.u_right.copy()
+        uv[m] = np.stack([CALIB.fx * Pc[:, 0] / Pc[:, 2] + CALIB.cx, CALIB.fy * Pc[:, 1] / Pc[:, 2] + CALIB.cy], axis=1)
+        ur[m] = -1.0
+        kfs[k] = dc_replace(kf, uv=uv, u_right=ur)
+    return kfs, set(np.flatnonzero(sil).tolist())
+
+
+def test_full_ba_leaves_out_landmarks_never_measured_in_stereo(lap):
+    """Silhouette landmarks (bearing-only in every keyframe, sliding along their rim) pull the full
+    BA off the exact lap when they are in it; left out (loop.full_ba_bearing_only_landmarks false),
+    the stereo landmarks alone recover it. A map whose landmarks all have a stereo edge gives the same
+    BA either way."""
+    from dataclasses import replace as dc_replace
+
+    alias = {10000 + j: j for j in lap["duplicated"]}
+    kfs, sil = _with_sliding_silhouettes(lap, share=0.4, slide_m=0.3)
+    runs = {inc: global_bundle_adjust(kfs, lap["drifted"], lap["positions"], CALIB,
+                                      dc_replace(LoopParams(), full_ba_bearing_only_landmarks=inc), alias=dict(alias),
+                                      fixed=0) for inc in (True, False)}
+    err = {inc: _max_errors(r.poses, lap["gt"]) for inc, r in runs.items()}
+    print(f"with silhouettes {err[True][0]:.3f} m {err[True][1]:.2f} deg, without {err[False][0]:.4f} m "
+          f"{err[False][1]:.3f} deg")
+    kept = {int(l) % 10000 for l in runs[False].landmark_ids.tolist()}
+    assert not kept & sil and len(kept) > 300
+    assert {int(l) % 10000 for l in runs[True].landmark_ids.tolist()} & sil
+    assert err[False][0] < 0.03 and err[False][1] < 0.2
+    assert err[True][0] > 5 * err[False][0]
+    plain = [global_bundle_adjust(lap["keyframes"], lap["drifted"], lap["positions"], CALIB,
+                                  dc_replace(LoopParams(), full_ba_bearing_only_landmarks=inc), alias=dict(alias), fixed=0)
+             for inc in (True, False)]
+    assert np.array_equal(plain[0].landmark_ids, plain[1].landmark_ids)
+    assert all(np.array_equal(plain[0].poses[k], plain[1].poses[k]) for k in plain[0].poses)
+
+
+@pytest.mark.parametrize("stereo_only", [True, False])
+def test_loop_closer_keeps_no_depth_for_bearing_only_keypoints(lap, stereo_only):
+    """Keypoints tracking measures bearing-only keep the stereo depth that initialised their landmark
+    in the keyframe; the loop closer drops it (loop.verify_stereo_only), so verification neither uses
+    a silhouette's depth as a 3D point nor measures u_right -1 as a right-image column. The monocular
+    closer's keyframes carry map-point depths without a right column and keep them."""
+    from dataclasses import replace as dc_replace
+
+    from canopy.loop.closer import LoopCloser
+    from canopy.loop.mono import MonoLoopCloser
+
+    kfs, _ = _with_sliding_silhouettes(lap, share=0.4, slide_m=0.3)
+    closer = LoopCloser(CALIB, dc_replace(LoopParams(), verify_stereo_only=stereo_only), None)
+    for k in range(3):
+        closer.add_keyframe(dc_replace(kfs[k], depth=kfs[k].depth.copy()))
+    for k in range(3):
+        stored, bearing = closer.detector.keyframes[k], kfs[k].u_right < 0
+        assert bearing.any() and (kfs[k].depth[bearing] > 0).all()
+        if stereo_only:
+            assert (stored.depth[bearing] == -1).all()
+        else:
+            assert np.array_equal(stored.depth[bearing], kfs[k].depth[bearing])
+        assert np.array_equal(stored.depth[~bearing], kfs[k].depth[~bearing])
+    assert MonoLoopCloser(CALIB, LoopParams()).params.verify_stereo_only is False

@@ -148,6 +148,8 @@ class LoopCloser:
                 self.poses[int(k)] = np.asarray(T, float)
         self.poses[kf.index] = np.asarray(kf.T_world_cam, float)
         self._store_landmarks(kf)
+        if self.params.verify_stereo_only:  # bearing-only keypoints: no depth (LoopParams.verify_stereo_only)
+            kf.depth = np.where(np.asarray(kf.u_right) >= 0, kf.depth, -1.0)
         constraint = self.detector.add_keyframe(kf)
         self._set_parent(kf.index)
         t_detect = (time.perf_counter() - t0) * 1e3

@@ -64,10 +64,11 @@ class GlobalBAResult:
 
 
 def _observations(keyframes: dict[int, PlaceKeyframe], poses: dict[int, np.ndarray], positions: dict[int, np.ndarray],
-                  alias: dict[int, int], min_observations: int):
+                  alias: dict[int, int], min_observations: int, bearing_only_landmarks: bool = True):
     """All (keyframe, landmark, keypoint) edges of landmarks with a position, seen by at least
-    ``min_observations`` keyframes (one view constrains no pose), one edge per keyframe and landmark."""
-    e_kf, e_lm, e_kp = [], [], []
+    ``min_observations`` keyframes (one view constrains no pose), one edge per keyframe and landmark;
+    without ``bearing_only_landmarks``, only landmarks at least one keyframe measured in stereo."""
+    e_kf, e_lm, e_kp, e_st = [], [], [], []
     for k in sorted(poses):
         kf = keyframes.get(k)
         if kf is None:
@@ -82,13 +83,16 @@ def _observations(keyframes: dict[int, PlaceKeyframe], poses: dict[int, np.ndarr
         e_kf.append(np.full(len(rows), k, np.int64))
         e_lm.append(lids[rows])
         e_kp.append(rows)
+        e_st.append(np.asarray(kf.u_right, float)[rows] >= 0)
     if not e_kf:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
-    e_kf, e_lm, e_kp = np.concatenate(e_kf), np.concatenate(e_lm), np.concatenate(e_kp)
+    e_kf, e_lm, e_kp, e_st = np.concatenate(e_kf), np.concatenate(e_lm), np.concatenate(e_kp), np.concatenate(e_st)
     has_pos = np.array([int(l) in positions for l in e_lm.tolist()], bool)
-    e_kf, e_lm, e_kp = e_kf[has_pos], e_lm[has_pos], e_kp[has_pos]
+    e_kf, e_lm, e_kp, e_st = e_kf[has_pos], e_lm[has_pos], e_kp[has_pos], e_st[has_pos]
     uniq, inv, counts = np.unique(e_lm, return_inverse=True, return_counts=True)
     keep = counts[inv] >= min_observations
+    if not bearing_only_landmarks:  # a landmark with no stereo edge has no measured depth
+        keep &= np.bincount(inv, weights=e_st.astype(float), minlength=len(uniq))[inv] > 0
     return e_kf[keep], e_lm[keep], e_kp[keep]
 
 
@@ -137,7 +141,8 @@ def global_bundle_adjust(keyframes: dict[int, PlaceKeyframe], poses: dict[int, n
     t0 = time.perf_counter()
     alias = alias or {}
     fixed = min(poses) if fixed is None else fixed
-    e_kf, e_lm, e_kp = _observations(keyframes, poses, positions, alias, params.full_ba_min_observations)
+    e_kf, e_lm, e_kp = _observations(keyframes, poses, positions, alias, params.full_ba_min_observations,
+                                     params.full_ba_bearing_only_landmarks)
     n = len(e_kf)
     uv = np.empty((n, 2))
     ur = np.empty(n)

@@ -107,7 +107,8 @@ class MonoLoopCloser(LoopCloser):
         super().__init__(calib, params, vocabulary)
         # landmark fusion and the full BA after a loop are stereo (rigid corrections, stereo
         # factors); a monocular map is corrected by similarities only
-        self.params = replace(self.params, fuse=False, full_ba=False)
+        # (and its keyframes carry map-point depths with no right column: keep them)
+        self.params = replace(self.params, fuse=False, full_ba=False, verify_stereo_only=False)
         self.mono = mono or MonoParams()
         self.detector = MonoLoopDetector(calib, self.params, vocabulary, plausible=self.drift_check, mono=self.mono)
 
