@@ -190,8 +190,10 @@ def test_a_forked_helper_dies_with_its_sigkilled_parent(tmp_path):
         "    os._exit(0)\n"
         "print(pid, flush=True)\n"
         "time.sleep(60)\n")
-    middle = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True,
-                              cwd=str(Path(__file__).resolve().parents[1]))
+    root = str(Path(__file__).resolve().parents[1])
+    # the script lives in tmp_path: the checkout goes on its path (an editable install may point elsewhere)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")]))}
+    middle = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True, cwd=root, env=env)
     helper = int(middle.stdout.readline())
     time.sleep(0.3)  # the helper has called prctl
     os.kill(middle.pid, signal.SIGKILL)
