@@ -200,17 +200,6 @@ class KeyframeDatabase:
     def bow(self, kf: int) -> Bow:
         return self._entries[kf].bow
 
-    def score(self, kf_a: int, kf_b: int) -> float:
-        """Combined score between two stored keyframes."""
-        a, b = self._entries[kf_a], self._entries[kf_b]
-        return combined_score(l1_score(a.bow, b.bow), l1_score(a.line_bow, b.line_bow), a.stats, b.stats)
-
-    def score_with(self, bow: Bow, line_bow: Bow | None, stats: FeatureStats | None, kf: int) -> float:
-        """Combined score between a query vector and stored keyframe ``kf``."""
-        e = self._entries[kf]
-        stats = stats or FeatureStats(n_points=len(bow))
-        return combined_score(l1_score(bow, e.bow), l1_score(line_bow or {}, e.line_bow), stats, e.stats)
-
     def scores(self, bow: Bow, line_bow: Bow | None = None, stats: FeatureStats | None = None) -> dict[int, tuple[float, int]]:
         """Combined score and shared point words of the query with every stored keyframe that
         shares a word with it (one pass over the inverted index; others score 0)."""

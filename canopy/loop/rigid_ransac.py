@@ -21,20 +21,9 @@ import math
 
 import numpy as np
 
+from canopy.metrics import umeyama_alignment
+
 BATCH = 100  # hypotheses solved and scored together
-
-
-def kabsch_batched(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rotations R (H,3,3) and translations t (H,3) with B ~= R A + t for each of H point
-    sets A, B (H,k,3) (Umeyama 1991 without scale; the sign fix keeps det R = +1)."""
-    ma, mb = A.mean(axis=1), B.mean(axis=1)
-    C = np.einsum("hki,hkj->hij", B - mb[:, None], A - ma[:, None])   # sum_k b_k a_k^T
-    U, _, Vt = np.linalg.svd(C)
-    d = np.sign(np.linalg.det(U) * np.linalg.det(Vt))
-    d[d == 0] = 1.0
-    R = U @ (Vt * np.stack([np.ones_like(d), np.ones_like(d), d], axis=1)[:, :, None])
-    t = mb - np.einsum("hij,hj->hi", R, ma)
-    return R, t
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -58,7 +47,7 @@ def triad_batched(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     """The minimal solver: R (H,3,3), t (H,3) mapping each point triple A (H,3,3) onto B with
     the triangles' frames aligned (the TRIAD construction: exact for noise-free triples, NaN
     for collinear ones, which then score no inliers). Cheaper than an SVD per hypothesis; the
-    consensus is refitted by ``kabsch_batched``."""
+    consensus is refitted by least squares (``umeyama_alignment``)."""
     R = _triad(B) @ np.swapaxes(_triad(A), 1, 2)
     t = B.mean(axis=1) - np.einsum("hij,hj->hi", R, A.mean(axis=1))
     return R, t
@@ -130,10 +119,10 @@ def rigid_ransac(X_cand: np.ndarray, X_query: np.ndarray, uv_query: np.ndarray, 
     # kept only if it does not lose inliers
     sel = np.intersect1d(np.flatnonzero(best_mask), both)
     if len(sel) >= 3:
-        R, t = kabsch_batched(X_cand[sel][None], X_query[sel][None])
-        inl = reprojection_inliers(R, t, X_cand, uv_query, K, max_error_px)[0]
+        R, t, _ = umeyama_alignment(X_cand[sel].T, X_query[sel].T)
+        inl = reprojection_inliers(R[None], t[None], X_cand, uv_query, K, max_error_px)[0]
         if inl.sum() >= best_mask.sum():
-            best_mask, best_R, best_t = inl, R[0], t[0]
+            best_mask, best_R, best_t = inl, R, t
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = best_R, best_t
     return T, best_mask
