@@ -320,3 +320,19 @@ def test_keypoints_opencv_drops_at_the_border_leave_the_rest_aligned(kitti_pair,
     _, d = orb.compute(left, kps)
     np.testing.assert_array_equal(f.descriptors[lvl0], d)
     np.testing.assert_array_equal(f.response[lvl0], harris_responses(left, x, y))
+
+
+def test_without_responses_the_features_are_the_same_and_responses_zero(kitti_pair, kitti_params):
+    """The tracker's extractors skip the Harris responses (nothing downstream reads them): the same
+    keypoints, octaves and descriptors, responses all zero; the other rankings still compute them."""
+    left, right, _ = kitti_pair
+    for img in (left, right):
+        full = CellExtractor(kitti_params).extract(img)
+        lean = CellExtractor(kitti_params, responses=False).extract(img)
+        for a, b in zip((full.uv, full.octave, full.descriptors), (lean.uv, lean.octave, lean.descriptors)):
+            np.testing.assert_array_equal(a, b)
+        assert np.all(lean.response == 0) and np.any(full.response != 0)
+    harris = replace(kitti_params, cell_ranking="harris")
+    np.testing.assert_array_equal(CellExtractor(harris, responses=False).extract(left).response,
+                                  CellExtractor(harris).extract(left).response)
+    assert isinstance(make_extractor(kitti_params, responses=False), CellExtractor)

@@ -197,10 +197,16 @@ class CellExtractor:
     Eq. 18). ``fallback_threshold`` is given only by the AFE rule on frames the enhancement
     changed: with ``extractor_enhanced: opencv`` those frames go to cv2.ORB (``OrbExtractor``);
     with ``cells`` it is the per-cell fallback. ``min_keypoints`` is unused (the fallback is per cell).
+
+    ``responses=False`` (the tracker: stereo matching, map searches and keyframes read positions,
+    octaves and descriptors only): with ``cell_ranking: fast`` the Harris responses rank nothing,
+    so they are not computed and ``Features.response`` is all zeros (~3 ms per KITTI image). The
+    other rankings need them and compute them anyway.
     """
 
-    def __init__(self, params: TrackingParams):
+    def __init__(self, params: TrackingParams, responses: bool = True):
         self.params = params
+        self.responses = responses
         self.scale_factors = params.scale_factor ** np.arange(params.n_levels)
         self.quotas = level_quotas(params.n_features, params.scale_factor, params.n_levels)
         self.border = max(params.edge_threshold, HALF_PATCH + 1)
@@ -344,17 +350,15 @@ class CellExtractor:
                 sel, harris = sel[keep], harris[keep]
             elif rank == "fast":  # ORB-SLAM as is: the best FAST score per node
                 sel = quadtree_select(xf, yf, fast_score, rx, ry, rw, rh, quota)
-                harris = harris_responses(level, x[sel], y[sel])
+                harris = harris_responses(level, x[sel], y[sel]) if self.responses else np.zeros(len(sel), np.float32)
             else:  # "harris": the best Harris response per node
                 harris = harris_responses(level, x, y)
                 sel = quadtree_select(xf, yf, harris, rx, ry, rw, rh, quota)
                 harris = harris[sel]
             x, y = x[sel], y[sel]
             angles = ic_angles(level, x, y)
-            kps = cv2.KeyPoint_convert(np.column_stack([x, y]).astype(np.float32), float(self.params.patch_size),
-                                       1.0, 0, -1)
-            for k, a in zip(kps, angles.tolist()):
-                k.angle = a
+            size = float(self.params.patch_size)
+            kps = [cv2.KeyPoint(u, v, size, a) for u, v, a in zip(x.tolist(), y.tolist(), angles.tolist())]
             kps, d = self._orb.compute(level, kps)
             if d is None or len(kps) == 0:
                 continue
@@ -374,6 +378,7 @@ class CellExtractor:
                         np.concatenate(desc), extractor="cells")
 
 
-def make_extractor(params: TrackingParams):
-    """The tracking extractor that ``params.extractor`` names (one per image: not thread-safe)."""
-    return CellExtractor(params) if params.extractor == "cells" else OrbExtractor(params)
+def make_extractor(params: TrackingParams, responses: bool = True):
+    """The tracking extractor that ``params.extractor`` names (one per image: not thread-safe).
+    ``responses=False``: for an image whose features only serve stereo matching (``CellExtractor``)."""
+    return CellExtractor(params, responses) if params.extractor == "cells" else OrbExtractor(params)
