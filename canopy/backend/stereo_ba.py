@@ -204,6 +204,25 @@ class _Linearised:
         self.pts, self.kf = edges.point[loc], edges.pose[loc]
         self.n_local = n_local
         self.st = st
+        self._W = None
+
+    def _point_major_pair(self, Hpp_inv: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``point_major`` of H_cp and of A = H_cp Hpp^-1. W does not depend on the damping, so it is
+        built once per linearisation (LM may solve several times at one point). Where no point is
+        seen twice by one pose, V's block (point p, pose l) is Hpp^-1[p] W's: one batched (3x3)(3x6L)
+        product per point instead of a second scatter into a zeroed matrix (Hpp^-1 is exactly
+        symmetric, so the products and their order are A's; identical results on recorded KITTI BAs)."""
+        st = self.st
+        if self._W is None:
+            self._W = st.point_major(self.Hcp)
+        W = self._W
+        if not st.unique:
+            return W, st.point_major(A)
+        n_chunks, rows, cols = W.shape
+        Hinv = np.zeros((n_chunks * rows // 3, 3, 3))
+        Hinv[: len(Hpp_inv)] = Hpp_inv
+        V = np.matmul(Hinv, W.reshape(-1, 3, cols)).reshape(n_chunks, rows, cols)
+        return W, V
 
     def solve(self, lam: float) -> tuple[np.ndarray, np.ndarray]:
         """Damped step: (n_local,6) pose increments and (P,3) point increments."""
@@ -215,7 +234,7 @@ class _Linearised:
         # V = [Hpp^-1 H_pc] (zero where a pose does not see the point): a few dense products
         # instead of one 6x3x6 product per pair of edges on a point (KITTI: ~24 k pairs; the
         # reduction 14 -> ~2 ms per solve)
-        W, V = st.point_major(self.Hcp), st.point_major(A)
+        W, V = self._point_major_pair(Hpp_inv, A)
         S = -np.matmul(W.transpose(0, 2, 1), V).sum(axis=0)
         S4 = S.reshape(L, 6, L, 6)
         idx = np.arange(L)
