@@ -149,7 +149,7 @@ def quadtree_select(x: np.ndarray, y: np.ndarray, score: np.ndarray, x0: float, 
     rx, ry = (x - x0) / rw, (y - y0) / height             # root-node units
     # rank of each point's score (0 = best): one sort serves every depth's best-per-node
     rank = np.empty(n, np.int64)
-    rank[np.argsort(-score, kind="stable")] = np.arange(n)
+    rank[np.argsort(_descending_key(score), kind="stable")] = np.arange(n)
     # depths below log4(quota / n_root) have fewer nodes than the quota: start there
     depth = max(0, int(np.floor(np.log(quota / n_root) / np.log(4.0))))
     prev_key = None if depth == 0 else _node_keys(rx, ry, n_root, depth - 1)
@@ -172,6 +172,18 @@ def quadtree_select(x: np.ndarray, y: np.ndarray, score: np.ndarray, x0: float, 
     rest = winners[~is_parent_best[winners]]
     rest = rest[np.argsort(rank[rest], kind="stable")[: quota - len(parent_best)]]
     return np.sort(np.concatenate([parent_best, rest]))
+
+
+def _descending_key(score: np.ndarray) -> np.ndarray:
+    """A key whose stable ascending sort is that of ``-score``. FAST scores are small integers
+    (0..255, stored as float32): as int16, numpy's stable sort is a radix sort, ~10x faster than
+    the merge sort of floats (~0.4 ms per 5 k corners); same order, ties in input order."""
+    neg = -np.asarray(score)
+    if len(neg) and neg.dtype.kind == "f" and -32768 <= neg.min() and neg.max() <= 32767:
+        as_int = neg.astype(np.int16)
+        if np.array_equal(as_int, neg):
+            return as_int
+    return neg
 
 
 def _node_keys(rx: np.ndarray, ry: np.ndarray, n_root: int, depth: int) -> np.ndarray:
