@@ -48,8 +48,10 @@ class StereoEdges:
 
 def _project(T_cw: np.ndarray, X: np.ndarray, edges: StereoEdges, calib: StereoCalibration):
     """Residuals (E,3), camera-frame points (E,3) and rotations (E,3,3) of every edge."""
-    R = T_cw[edges.pose, :3, :3]
-    Pc = _mv(R, X[edges.point]) + T_cw[edges.pose, :3, 3]
+    # np.take from contiguous copies of the few poses' blocks: the same values as
+    # T_cw[edges.pose, :3, :3] (mixed fancy index and slices), ~10x faster over ~7 k edges
+    R = np.take(np.ascontiguousarray(T_cw[:, :3, :3]), edges.pose, axis=0)
+    Pc = _mv(R, np.take(X, edges.point, axis=0)) + np.take(np.ascontiguousarray(T_cw[:, :3, 3]), edges.pose, axis=0)
     z = Pc[:, 2]
     front = z > _MIN_DEPTH
     iz = np.where(front, 1.0 / np.where(front, z, 1.0), 0.0)
@@ -78,7 +80,7 @@ def _jacobians(Pc: np.ndarray, R: np.ndarray, edges: StereoEdges, calib: StereoC
     with ``loc`` the pose Jacobians of those edges only (the fixed poses' are never used)."""
     Jp = stereo_point_jacobian(Pc, calib, _MIN_DEPTH)
     Jp[:, 2, :] *= edges.stereo[:, None]
-    Jpl, Pcl = (Jp, Pc) if loc is None else (Jp[loc], Pc[loc])
+    Jpl, Pcl = (Jp, Pc) if loc is None else (np.take(Jp, loc, axis=0), np.take(Pc, loc, axis=0))
     # dPc/dxi = [-[Pc]x | I]
     Jc = np.empty((len(Pcl), 3, 6))
     Jc[:, :, 3:] = Jpl
@@ -92,7 +94,8 @@ def _jacobians(Pc: np.ndarray, R: np.ndarray, edges: StereoEdges, calib: StereoC
 class _Groups:
     """Sums of per-item blocks by an integer key in [0, n), with the grouping computed once (the
     edges of a BA keep their poses and points through all iterations): a sort, then
-    ``np.add.reduceat`` over contiguous runs."""
+    ``np.add.reduceat`` over contiguous runs. (Gathers along the first axis here and below use
+    ``np.take``: the same values as fancy indexing, 2-4x faster on ~7 k small blocks.)"""
 
     def __init__(self, keys: np.ndarray, n: int):
         self.order = np.argsort(keys, kind="stable")
@@ -104,7 +107,7 @@ class _Groups:
     def sum(self, blocks: np.ndarray, presorted: bool = False) -> np.ndarray:
         out = np.zeros((self.n,) + blocks.shape[1:])
         if len(self.starts):
-            b = blocks if presorted else blocks[self.order]
+            b = blocks if presorted else np.take(blocks, self.order, axis=0)
             out[self.keys] = np.add.reduceat(b.reshape(len(b), -1), self.starts, axis=0).reshape(
                 (len(self.starts),) + blocks.shape[1:])
         return out
@@ -197,10 +200,10 @@ class _Linearised:
         self.Hpp = st.by_point.sum(JxT @ (Jx * w[:, None, None]))
         self.bp = st.by_point.sum(_mv(JxT, Wr))
         JlT = Jc.transpose(0, 2, 1)
-        wl = w[loc, None, None]
+        wl = np.take(w, loc)[:, None, None]
         self.Hcc = st.loc_by_pose.sum(JlT @ (Jc * wl))
-        self.bc = st.loc_by_pose.sum(_mv(JlT, Wr[loc]))
-        self.Hcp = JlT @ (Jx[loc] * wl)                                   # (m,6,3)
+        self.bc = st.loc_by_pose.sum(_mv(JlT, np.take(Wr, loc, axis=0)))
+        self.Hcp = JlT @ (np.take(Jx, loc, axis=0) * wl)                  # (m,6,3)
         self.pts, self.kf = edges.point[loc], edges.pose[loc]
         self.n_local = n_local
         self.st = st
@@ -228,7 +231,7 @@ class _Linearised:
         """Damped step: (n_local,6) pose increments and (P,3) point increments."""
         L, st = self.n_local, self.st
         Hpp_inv = _inv_sym3(self.Hpp, lam)
-        A = self.Hcp @ Hpp_inv[self.pts]                               # (m,6,3) H_cp Hpp^-1
+        A = self.Hcp @ np.take(Hpp_inv, self.pts, axis=0)              # (m,6,3) H_cp Hpp^-1
         # reduced camera system S = H_cc + lam I - sum over points of H_cp Hpp^-1 H_pc, the sum as
         # the (6L x 3P) (3P x 6L) product of the point-major matrices W = [H_pc] and
         # V = [Hpp^-1 H_pc] (zero where a pose does not see the point): a few dense products
@@ -239,9 +242,9 @@ class _Linearised:
         S4 = S.reshape(L, 6, L, 6)
         idx = np.arange(L)
         S4[idx, :, idx, :] += self.Hcc + lam * np.eye(6)
-        g = self.bc - st.loc_by_pose.sum(_mv(A, self.bp[self.pts]))
+        g = self.bc - st.loc_by_pose.sum(_mv(A, np.take(self.bp, self.pts, axis=0)))
         dc = np.linalg.solve(S, g.reshape(-1)).reshape(L, 6)
-        rhs = self.bp - st.loc_by_point.sum(_mv(self.Hcp.transpose(0, 2, 1), dc[self.kf]))
+        rhs = self.bp - st.loc_by_point.sum(_mv(self.Hcp.transpose(0, 2, 1), np.take(dc, self.kf, axis=0)))
         return dc, _mv(Hpp_inv, rhs)
 
 
