@@ -103,13 +103,21 @@ class _Groups:
         self.starts = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]]) if len(ks) else np.zeros(0, np.int64)
         self.keys = ks[self.starts]
         self.n = n
+        # local BA's edges come sorted by point (``_observation_edges``: by landmark id), and every
+        # point has an edge: then the sums need neither the reordering gather nor the scatter
+        self.in_order = bool(np.array_equal(self.order, np.arange(len(keys))))
+        self.all_keys = bool(np.array_equal(self.keys, np.arange(n)))
 
     def sum(self, blocks: np.ndarray, presorted: bool = False) -> np.ndarray:
+        if not len(self.starts):
+            return np.zeros((self.n,) + blocks.shape[1:])
+        b = blocks if presorted or self.in_order else np.take(blocks, self.order, axis=0)
+        sums = np.add.reduceat(b.reshape(len(b), -1), self.starts, axis=0).reshape(
+            (len(self.starts),) + blocks.shape[1:])
+        if self.all_keys:
+            return sums
         out = np.zeros((self.n,) + blocks.shape[1:])
-        if len(self.starts):
-            b = blocks if presorted else np.take(blocks, self.order, axis=0)
-            out[self.keys] = np.add.reduceat(b.reshape(len(b), -1), self.starts, axis=0).reshape(
-                (len(self.starts),) + blocks.shape[1:])
+        out[self.keys] = sums
         return out
 
 
