@@ -16,6 +16,8 @@ Where things are:
 from __future__ import annotations
 
 import time
+from collections import Counter
+from itertools import chain
 
 import gtsam
 import numpy as np
@@ -181,11 +183,10 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
 
     # ----------------------------------------------------------------- covisibility window
     def _covisible(self, rec: Keyframe) -> dict[int, int]:
-        counts: dict[int, int] = {}
-        for lid in rec.landmark[rec.landmark >= 0].tolist():
-            for k in self.landmarks[lid].obs:
-                if k != rec.index:
-                    counts[k] = counts.get(k, 0) + 1
+        # the observing keyframes of all of rec's landmarks chained and counted at C level (Counter)
+        counts = Counter(chain.from_iterable(self.landmarks[lid].obs
+                                             for lid in rec.landmark[rec.landmark >= 0].tolist()))
+        counts.pop(rec.index, None)
         if self.params.use_lines:  # shared line landmarks make keyframes covisible too
             for lid in rec.line_landmark[rec.line_landmark >= 0].tolist():
                 for k in self.lines[lid].obs:
@@ -206,7 +207,7 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         seen = set()
         for k in local:
             seen.update(self.keyframes[k].landmark[self.keyframes[k].landmark >= 0].tolist())
-        fixed_set = {o for lid in seen for o in self.landmarks[lid].obs} - local_set
+        fixed_set = set(chain.from_iterable(self.landmarks[lid].obs for lid in seen)) - local_set
         first = self._segment_first[rec.segment]
         if first in local_set and len(local) > 1:  # the segment's first keyframe fixes the gauge
             local.remove(first)
