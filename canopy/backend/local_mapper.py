@@ -102,8 +102,8 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         self._add_seen_counts(kf)   # ORB-SLAM's found/visible statistics collected by tracking
         # observations of existing landmarks
         touched = []
-        for i in np.flatnonzero(kf.landmark_ids >= 0).tolist():
-            lid = int(kf.landmark_ids[i])
+        seen_rows = np.flatnonzero(kf.landmark_ids >= 0)
+        for i, lid in zip(seen_rows.tolist(), np.asarray(kf.landmark_ids)[seen_rows].tolist()):
             lm = self.landmarks.get(lid)
             if lm is None or lm.segment != self._segment or kf.index in lm.obs:
                 continue  # culled meanwhile, or from an older map segment
@@ -118,11 +118,13 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         Pc = np.stack([(rec.uv[idx, 0] - self.calib.cx) * z / self.calib.fx,
                        (rec.uv[idx, 1] - self.calib.cy) * z / self.calib.fy, z], axis=1)
         Pw = Pc @ rec.T_world_cam[:3, :3].T + rec.T_world_cam[:3, 3]
-        for j, i in enumerate(idx.tolist()):
-            lid = int(kf.new_landmark_ids[i])
-            self.landmarks[lid] = Landmark(lid, Pw[j], rec.descriptors[i].copy(), {kf.index: i},
+        # the new landmarks' descriptors copied in one go (each landmark holds its row; nothing
+        # writes a landmark's descriptor in place: updates replace it)
+        new_desc = rec.descriptors[idx]
+        for j, (i, lid) in enumerate(zip(idx.tolist(), np.asarray(kf.new_landmark_ids)[idx].tolist())):
+            self.landmarks[lid] = Landmark(lid, Pw[j], new_desc[j], {kf.index: i},
                                            first_order=rec.order, segment=self._segment)
-            rec.landmark[i] = lid
+        rec.landmark[idx] = np.asarray(kf.new_landmark_ids)[idx]
         self._update_descriptors(touched)
         if self.params.use_lines:
             self._insert_lines(kf, rec)
