@@ -44,12 +44,16 @@ def main() -> int:
     ap.add_argument("--base", type=Path, required=True, help="the other checkout's root")
     ap.add_argument("--dataset", default="kitti")
     ap.add_argument("--reps", type=int, default=1)
+    ap.add_argument("--no-responses", action="store_true",
+                    help="this checkout's extractor as the tracker builds it (responses=False): responses not compared")
     a = ap.parse_args()
     rel = Path("canopy/frontend/cell_extractor.py")
     base = load_module(a.base / rel, "base_cell_extractor")
     this = load_module(ROOT / rel, "this_cell_extractor")
     tp = load_run_config(a.dataset).tracking
-    ex_base, ex_this = base.CellExtractor(tp), this.CellExtractor(tp)
+    ex_base = base.CellExtractor(tp)
+    ex_this = this.CellExtractor(tp, responses=False) if a.no_responses else this.CellExtractor(tp)
+    fields = tuple(f for f in FIELDS if not (a.no_responses and f == "response"))
     src = open_source(a.dataset, None)
     images = [src.frame(i).left for i in range(len(src))] + [src.frame(i).right for i in range(len(src))]
     t_base, t_this, same = [], [], 0
@@ -61,7 +65,7 @@ def main() -> int:
             t0 = time.thread_time()
             ft = ex_this.extract(img)
             t_this.append(time.thread_time() - t0)
-            same += all(np.array_equal(getattr(fb, f), getattr(ft, f)) for f in FIELDS)
+            same += all(np.array_equal(getattr(fb, f), getattr(ft, f)) for f in fields)
     pb, pt = np.median(t_base) * 1e3, np.median(t_this) * 1e3
     print(f"{a.dataset}: {len(images)} images x {a.reps}: base p50 {pb:.2f} ms, this p50 {pt:.2f} ms "
           f"(thread CPU per image), ratio {pt / pb:.3f}; identical output on {same} of {len(t_base)} images")

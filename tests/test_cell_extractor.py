@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from canopy.config import load_run_config
-from canopy.frontend.cell_extractor import (CellExtractor, _best_per_key, harris_responses, ic_angles, level_quotas,
+from canopy.frontend.cell_extractor import (CellExtractor, _best_per_key, _descending_key, harris_responses, ic_angles, level_quotas,
                                             make_extractor, quadtree_select)
 from canopy.frontend.features import OrbExtractor
 from canopy.frontend.params import TrackingParams
@@ -320,3 +320,34 @@ def test_keypoints_opencv_drops_at_the_border_leave_the_rest_aligned(kitti_pair,
     _, d = orb.compute(left, kps)
     np.testing.assert_array_equal(f.descriptors[lvl0], d)
     np.testing.assert_array_equal(f.response[lvl0], harris_responses(left, x, y))
+
+
+def test_without_responses_the_features_are_the_same_and_responses_zero(kitti_pair, kitti_params):
+    """The tracker's extractors skip the Harris responses (nothing downstream reads them): the same
+    keypoints, octaves and descriptors, responses all zero; the other rankings still compute them."""
+    left, right, _ = kitti_pair
+    for img in (left, right):
+        full = CellExtractor(kitti_params).extract(img)
+        lean = CellExtractor(kitti_params, responses=False).extract(img)
+        for a, b in zip((full.uv, full.octave, full.descriptors), (lean.uv, lean.octave, lean.descriptors)):
+            np.testing.assert_array_equal(a, b)
+        assert np.all(lean.response == 0) and np.any(full.response != 0)
+    harris = replace(kitti_params, cell_ranking="harris")
+    np.testing.assert_array_equal(CellExtractor(harris, responses=False).extract(left).response,
+                                  CellExtractor(harris).extract(left).response)
+    assert isinstance(make_extractor(kitti_params, responses=False), CellExtractor)
+
+
+def test_descending_key_sorts_as_the_negated_scores():
+    """FAST scores (integers stored as float32, many ties) sort by an int16 key in the same
+    stable order as -score; other scores (Harris, fractions, out of int16 range) keep -score."""
+    rng = np.random.default_rng(5)
+    fast = rng.integers(7, 90, 3000).astype(np.float32)
+    key = _descending_key(fast)
+    assert key.dtype == np.int16
+    np.testing.assert_array_equal(np.argsort(key, kind="stable"), np.argsort(-fast, kind="stable"))
+    for other in (fast + 0.5, fast * 1e3, rng.uniform(0, 1, 50).astype(np.float32)):
+        assert _descending_key(other).dtype.kind == "f"
+        np.testing.assert_array_equal(np.argsort(_descending_key(other), kind="stable"),
+                                      np.argsort(-other, kind="stable"))
+    assert len(_descending_key(np.zeros(0, np.float32))) == 0

@@ -8,6 +8,7 @@ whole map. A landmark's ``obs`` maps keyframe index -> keypoint row and the keyf
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from itertools import chain
 
 import numpy as np
 
@@ -124,11 +125,24 @@ class MapStoreAccess:
         """Local BA's point edges: the landmarks the ``local`` keyframes observe (sorted ids) and
         every observation of them by a keyframe of ``kf_set``, as arrays (keyframe, landmark,
         keypoint row). Returns (lm_ids, e_kf, e_lm, e_kp)."""
-        lm_ids = sorted({lid for k in local for lid in self.keyframes[k].landmark[self.keyframes[k].landmark >= 0].tolist()})
-        # one flat generator into one array (the per-keyframe BA's hot loop; 2x faster than a list of tuples)
-        edges = np.fromiter((v for lid in lm_ids for k, i in self.landmarks[lid].obs.items() if k in kf_set
-                             for v in (k, lid, i)), np.int64).reshape(-1, 3)
-        return lm_ids, edges[:, 0], edges[:, 1], edges[:, 2]
+        seen = [self.keyframes[k].landmark for k in local]
+        lm_arr = _sorted_unique_ids(np.concatenate(seen)) if seen else np.zeros(0, np.int64)
+        lm_ids = lm_arr.tolist()
+        # every landmark's observations in their dict order, keys and values chained at C level,
+        # then the window's by a lookup table (a generator over ~7 k edges cost ~3 ms per KITTI keyframe)
+        obs = [self.landmarks[lid].obs for lid in lm_ids]
+        n_obs = np.fromiter(map(len, obs), np.int64, len(obs))
+        total = int(n_obs.sum())
+        e_kf = np.fromiter(chain.from_iterable(obs), np.int64, total)
+        e_kp = np.fromiter(chain.from_iterable(o.values() for o in obs), np.int64, total)
+        e_lm = np.repeat(lm_arr, n_obs)
+        if total == 0 or not kf_set:
+            keep = np.zeros(total, bool)
+        else:
+            in_set = np.zeros(max(int(e_kf.max()), max(kf_set)) + 1, bool)
+            in_set[list(kf_set)] = True
+            keep = in_set[e_kf]
+        return lm_ids, e_kf[keep], e_lm[keep], e_kp[keep]
 
     def _delete_landmark(self, lid: int) -> None:
         """Cull landmark ``lid``: out of the store and out of every keyframe that observed it."""

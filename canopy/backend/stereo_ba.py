@@ -48,8 +48,10 @@ class StereoEdges:
 
 def _project(T_cw: np.ndarray, X: np.ndarray, edges: StereoEdges, calib: StereoCalibration):
     """Residuals (E,3), camera-frame points (E,3) and rotations (E,3,3) of every edge."""
-    R = T_cw[edges.pose, :3, :3]
-    Pc = _mv(R, X[edges.point]) + T_cw[edges.pose, :3, 3]
+    # np.take from contiguous copies of the few poses' blocks: the same values as
+    # T_cw[edges.pose, :3, :3] (mixed fancy index and slices), ~10x faster over ~7 k edges
+    R = np.take(np.ascontiguousarray(T_cw[:, :3, :3]), edges.pose, axis=0)
+    Pc = _mv(R, np.take(X, edges.point, axis=0)) + np.take(np.ascontiguousarray(T_cw[:, :3, 3]), edges.pose, axis=0)
     z = Pc[:, 2]
     front = z > _MIN_DEPTH
     iz = np.where(front, 1.0 / np.where(front, z, 1.0), 0.0)
@@ -78,7 +80,7 @@ def _jacobians(Pc: np.ndarray, R: np.ndarray, edges: StereoEdges, calib: StereoC
     with ``loc`` the pose Jacobians of those edges only (the fixed poses' are never used)."""
     Jp = stereo_point_jacobian(Pc, calib, _MIN_DEPTH)
     Jp[:, 2, :] *= edges.stereo[:, None]
-    Jpl, Pcl = (Jp, Pc) if loc is None else (Jp[loc], Pc[loc])
+    Jpl, Pcl = (Jp, Pc) if loc is None else (np.take(Jp, loc, axis=0), np.take(Pc, loc, axis=0))
     # dPc/dxi = [-[Pc]x | I]
     Jc = np.empty((len(Pcl), 3, 6))
     Jc[:, :, 3:] = Jpl
@@ -92,7 +94,8 @@ def _jacobians(Pc: np.ndarray, R: np.ndarray, edges: StereoEdges, calib: StereoC
 class _Groups:
     """Sums of per-item blocks by an integer key in [0, n), with the grouping computed once (the
     edges of a BA keep their poses and points through all iterations): a sort, then
-    ``np.add.reduceat`` over contiguous runs."""
+    ``np.add.reduceat`` over contiguous runs. (Gathers along the first axis here and below use
+    ``np.take``: the same values as fancy indexing, 2-4x faster on ~7 k small blocks.)"""
 
     def __init__(self, keys: np.ndarray, n: int):
         self.order = np.argsort(keys, kind="stable")
@@ -100,13 +103,21 @@ class _Groups:
         self.starts = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]]) if len(ks) else np.zeros(0, np.int64)
         self.keys = ks[self.starts]
         self.n = n
+        # local BA's edges come sorted by point (``_observation_edges``: by landmark id), and every
+        # point has an edge: then the sums need neither the reordering gather nor the scatter
+        self.in_order = bool(np.array_equal(self.order, np.arange(len(keys))))
+        self.all_keys = bool(np.array_equal(self.keys, np.arange(n)))
 
     def sum(self, blocks: np.ndarray, presorted: bool = False) -> np.ndarray:
+        if not len(self.starts):
+            return np.zeros((self.n,) + blocks.shape[1:])
+        b = blocks if presorted or self.in_order else np.take(blocks, self.order, axis=0)
+        sums = np.add.reduceat(b.reshape(len(b), -1), self.starts, axis=0).reshape(
+            (len(self.starts),) + blocks.shape[1:])
+        if self.all_keys:
+            return sums
         out = np.zeros((self.n,) + blocks.shape[1:])
-        if len(self.starts):
-            b = blocks if presorted else blocks[self.order]
-            out[self.keys] = np.add.reduceat(b.reshape(len(b), -1), self.starts, axis=0).reshape(
-                (len(self.starts),) + blocks.shape[1:])
+        out[self.keys] = sums
         return out
 
 
@@ -197,32 +208,51 @@ class _Linearised:
         self.Hpp = st.by_point.sum(JxT @ (Jx * w[:, None, None]))
         self.bp = st.by_point.sum(_mv(JxT, Wr))
         JlT = Jc.transpose(0, 2, 1)
-        wl = w[loc, None, None]
+        wl = np.take(w, loc)[:, None, None]
         self.Hcc = st.loc_by_pose.sum(JlT @ (Jc * wl))
-        self.bc = st.loc_by_pose.sum(_mv(JlT, Wr[loc]))
-        self.Hcp = JlT @ (Jx[loc] * wl)                                   # (m,6,3)
+        self.bc = st.loc_by_pose.sum(_mv(JlT, np.take(Wr, loc, axis=0)))
+        self.Hcp = JlT @ (np.take(Jx, loc, axis=0) * wl)                  # (m,6,3)
         self.pts, self.kf = edges.point[loc], edges.pose[loc]
         self.n_local = n_local
         self.st = st
+        self._W = None
+
+    def _point_major_pair(self, Hpp_inv: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``point_major`` of H_cp and of A = H_cp Hpp^-1. W does not depend on the damping, so it is
+        built once per linearisation (LM may solve several times at one point). Where no point is
+        seen twice by one pose, V's block (point p, pose l) is Hpp^-1[p] W's: one batched (3x3)(3x6L)
+        product per point instead of a second scatter into a zeroed matrix (Hpp^-1 is exactly
+        symmetric, so the products and their order are A's; identical results on recorded KITTI BAs)."""
+        st = self.st
+        if self._W is None:
+            self._W = st.point_major(self.Hcp)
+        W = self._W
+        if not st.unique:
+            return W, st.point_major(A)
+        n_chunks, rows, cols = W.shape
+        Hinv = np.zeros((n_chunks * rows // 3, 3, 3))
+        Hinv[: len(Hpp_inv)] = Hpp_inv
+        V = np.matmul(Hinv, W.reshape(-1, 3, cols)).reshape(n_chunks, rows, cols)
+        return W, V
 
     def solve(self, lam: float) -> tuple[np.ndarray, np.ndarray]:
         """Damped step: (n_local,6) pose increments and (P,3) point increments."""
         L, st = self.n_local, self.st
         Hpp_inv = _inv_sym3(self.Hpp, lam)
-        A = self.Hcp @ Hpp_inv[self.pts]                               # (m,6,3) H_cp Hpp^-1
+        A = self.Hcp @ np.take(Hpp_inv, self.pts, axis=0)              # (m,6,3) H_cp Hpp^-1
         # reduced camera system S = H_cc + lam I - sum over points of H_cp Hpp^-1 H_pc, the sum as
         # the (6L x 3P) (3P x 6L) product of the point-major matrices W = [H_pc] and
         # V = [Hpp^-1 H_pc] (zero where a pose does not see the point): a few dense products
         # instead of one 6x3x6 product per pair of edges on a point (KITTI: ~24 k pairs; the
         # reduction 14 -> ~2 ms per solve)
-        W, V = st.point_major(self.Hcp), st.point_major(A)
+        W, V = self._point_major_pair(Hpp_inv, A)
         S = -np.matmul(W.transpose(0, 2, 1), V).sum(axis=0)
         S4 = S.reshape(L, 6, L, 6)
         idx = np.arange(L)
         S4[idx, :, idx, :] += self.Hcc + lam * np.eye(6)
-        g = self.bc - st.loc_by_pose.sum(_mv(A, self.bp[self.pts]))
+        g = self.bc - st.loc_by_pose.sum(_mv(A, np.take(self.bp, self.pts, axis=0)))
         dc = np.linalg.solve(S, g.reshape(-1)).reshape(L, 6)
-        rhs = self.bp - st.loc_by_point.sum(_mv(self.Hcp.transpose(0, 2, 1), dc[self.kf]))
+        rhs = self.bp - st.loc_by_point.sum(_mv(self.Hcp.transpose(0, 2, 1), np.take(dc, self.kf, axis=0)))
         return dc, _mv(Hpp_inv, rhs)
 
 
