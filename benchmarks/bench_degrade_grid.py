@@ -334,6 +334,9 @@ def main(argv=None) -> int:
                          "default, = rendered for the presets), or SGBM on the clean pair (stereo: the grid "
                          "before s9; its haze texture differs between the cameras, docs/notes/s8-haze.md); "
                          "KITTI / EuRoC always use SGBM")
+    ap.add_argument("--skip-clean", action="store_true",
+                    help="run the degraded cells only (e.g. re-running the hazy column): the criteria then need "
+                         "the clean rows of an earlier run, merged in with --merge")
     ap.add_argument("--cells-cache", default=None, metavar="DIR",
                     help="keep the degraded copies in DIR and reuse them (e.g. $CANOPY_CACHE_DIR/degraded)")
     ap.add_argument("--out-dir", default=str(ROOT / "docs" / "results"))
@@ -376,7 +379,7 @@ def main(argv=None) -> int:
             max_frames = args.max_frames or base["max_frames"].get(d)
             if kind == "euroc" and d in PRESETS:
                 max_frames = max_frames or 400
-            for cell in [None] + cells:
+            for cell in ([] if args.skip_clean else [None]) + cells:
                 if cell is None:
                     path, label = clean_path, "clean"
                 else:
