@@ -5,7 +5,7 @@ the haze is then consistent between the two cameras wherever the left depth is (
 image's own artefacts: the 128-px left band SGBM cannot match, filled from the row's first valid
 disparity, and the holes filled from the farther neighbour).
 
-    python docs/results/s9_haze/scripts/kitti_consistent_haze.py /tmp/s9haze/kitti_hh_consistent
+    python docs/results/s9_haze/scripts/kitti_consistent_haze.py /tmp/s9haze/kitti_hh_consistent [noise seed, default 0]
 """
 import sys
 from pathlib import Path
@@ -23,5 +23,5 @@ def consistent_rays(left, right, calib, params):
 
 
 ds._ray_maps = consistent_rays
-cell = grid_cells((1.0,), (0.06,), ("high",), seed=0)[0]
+cell = grid_cells((1.0,), (0.06,), ("high",), seed=int(sys.argv[2]) if len(sys.argv) > 2 else 0)[0]
 print(ds.degrade_sequence("kitti", sys.argv[1], cell, force=True))
