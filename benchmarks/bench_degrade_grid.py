@@ -2,7 +2,8 @@
 
 Every cell of ``canopy.degrade.grid_cells`` (light reaching the sensor ×
 haze β from depth × noise sensor, all with shot and read noise) is written
-by ``tools/degrade_sequence.py`` (haze depth from SGBM on the clean pair,
+by ``tools/degrade_sequence.py`` (haze depth: the renderer's depth on the
+generated presets, SGBM on the clean pair for KITTI / EuRoC; ``--haze-depth``;
 noise seeded per frame and camera) and run through the full multi-process
 system (``canopy.app.run_slam``, lockstep clock, the dataset's shipped
 config) once per enhancement method: ``none`` and ``auto`` (the default).
@@ -45,7 +46,7 @@ from canopy.degrade import GRID_BETAS, GRID_GAINS, NOISE_LEVELS, grid_cells  # n
 from canopy.report import write_json  # noqa: E402
 from shared.errors import ConfigError  # noqa: E402
 from canopy.sources import BUNDLED_DATA  # noqa: E402
-from tools.degrade_sequence import degrade_sequence  # noqa: E402
+from tools.degrade_sequence import HAZE_DEPTHS, degrade_sequence, resolve_haze_depth  # noqa: E402
 
 PRESETS = ("day-loop", "dusk-loop", "haze-row", "dark-rows")
 DATASETS = ("kitti", "euroc") + PRESETS
@@ -143,20 +144,39 @@ def pair_preprocess():
     return treat
 
 
+def cell_haze_depth(haze_depth: str, dataset: str, kind: str, clean_path: Path) -> str:
+    """``stereo`` or ``rendered`` for ``dataset``'s hazy cells: ``--haze-depth`` applies to the generated
+    presets; KITTI / EuRoC (real images, no rendered depth) always use SGBM."""
+    if dataset not in PRESETS:
+        return "stereo"
+    return resolve_haze_depth(haze_depth, kind, clean_path)
+
+
 def degraded_cell(kind: str, dataset: str, clean_path: Path, cell, max_frames, workdir: Path,
                   cells_cache: Path | None, haze_depth: str = "stereo") -> tuple[Path, bool]:
     """(folder of the degraded copy of ``dataset`` for ``cell``, whether it is a temporary one).
 
-    With ``cells_cache`` the copy is kept there (named by dataset, frame count, cell and seed) and
-    reused by later runs of this benchmark (e.g. the ``none`` / ORB-SLAM3-raw columns and the
-    ``auto`` columns run apart), instead of being written again and deleted."""
+    ``haze_depth`` is the resolved one (``stereo`` / ``rendered``, ``cell_haze_depth``). With
+    ``cells_cache`` the copy is kept there (named by dataset, frame count, cell, seed and, for hazy
+    cells from the rendered depth, ``-rendered``) and reused by later runs of this benchmark (e.g. the
+    ``none`` / ORB-SLAM3-raw columns and the ``auto`` columns run apart), instead of being written again
+    and deleted; a cached copy whose DEGRADED.yaml names another haze depth is an error, not reused."""
+    if haze_depth not in ("stereo", "rendered"):
+        raise ValueError(f"degraded_cell: haze_depth must be resolved to stereo or rendered, got {haze_depth!r}")
     if cells_cache is None:
         return degrade_sequence(kind, workdir / f"{dataset}_{cell.label}", cell, path=clean_path,
                                 max_frames=max_frames, haze_depth=haze_depth), True
     rendered = "-rendered" if haze_depth == "rendered" and cell.haze else ""  # never mixed up with SGBM-haze copies
     out = cells_cache / f"{dataset}-{max_frames or 'all'}-{cell.label}-seed{cell.seed}{rendered}"
-    if not (out / "DEGRADED.yaml").is_file():
+    record = out / "DEGRADED.yaml"
+    if not record.is_file():
         degrade_sequence(kind, out, cell, path=clean_path, max_frames=max_frames, force=True, haze_depth=haze_depth)
+    elif cell.haze:
+        import yaml
+        made = (yaml.safe_load(record.read_text()) or {}).get("haze_depth", "stereo")  # older copies: SGBM
+        if made != haze_depth:
+            raise SystemExit(f"bench_degrade_grid: cached cell {out} was hazed from {made} depth, "
+                             f"this run asks for {haze_depth}")
     return out, False
 
 
@@ -309,10 +329,14 @@ def main(argv=None) -> int:
     ap.add_argument("--set", dest="settings", action="append", default=[], metavar="SECTION.FIELD=VALUE",
                     help="override a tracking / enhancement / mapping setting of the dataset's config for Canopy's runs "
                          "(with --in-process; repeatable), e.g. --set tracking.extractor=opencv")
-    ap.add_argument("--haze-depth", choices=("stereo", "rendered"), default="stereo",
-                    help="haze depth of the generated presets' cells: SGBM on the clean pair (default), or the "
-                         "renderer's exact depth (tools/degrade_sequence.py --haze-depth; dark-rows: "
-                         "docs/notes/s8-haze.md); KITTI / EuRoC always use SGBM")
+    ap.add_argument("--haze-depth", choices=HAZE_DEPTHS, default="auto",
+                    help="haze depth of the generated presets' cells: the renderer's exact depth (auto, the "
+                         "default, = rendered for the presets), or SGBM on the clean pair (stereo: the grid "
+                         "before s9; its haze texture differs between the cameras, docs/notes/s8-haze.md); "
+                         "KITTI / EuRoC always use SGBM")
+    ap.add_argument("--skip-clean", action="store_true",
+                    help="run the degraded cells only (e.g. re-running the hazy column): the criteria then need "
+                         "the clean rows of an earlier run, merged in with --merge")
     ap.add_argument("--cells-cache", default=None, metavar="DIR",
                     help="keep the degraded copies in DIR and reuse them (e.g. $CANOPY_CACHE_DIR/degraded)")
     ap.add_argument("--out-dir", default=str(ROOT / "docs" / "results"))
@@ -355,17 +379,18 @@ def main(argv=None) -> int:
             max_frames = args.max_frames or base["max_frames"].get(d)
             if kind == "euroc" and d in PRESETS:
                 max_frames = max_frames or 400
-            for cell in [None] + cells:
+            for cell in ([] if args.skip_clean else [None]) + cells:
                 if cell is None:
                     path, label = clean_path, "clean"
                 else:
                     label = cell.label
-                    haze_depth = "rendered" if args.haze_depth == "rendered" and d in PRESETS else "stereo"
+                    haze_depth = cell_haze_depth(args.haze_depth, d, kind, clean_path)
                     path, temporary = degraded_cell(kind, d, clean_path, cell, max_frames, tmp, cells_cache, haze_depth)
+                row_haze = haze_depth if cell is not None and cell.haze else None  # which depth made the haze
                 for m in args.methods:
                     r = run_canopy_in_process(d, path, clean_path, m, max_frames, settings) if args.in_process else \
                         run_canopy(d, path, m, max_frames, tmp / f"{d}_{label}", settings)
-                    r.update({"dataset": d, "cell": label, "method": m,
+                    r.update({"dataset": d, "cell": label, "method": m, "haze_depth": row_haze,
                               "gain": None if cell is None else cell.effective_gain,
                               "beta": None if cell is None else (cell.beta if cell.haze else 0.0),
                               "noise": None if cell is None else label.rsplit("-", 1)[1]})
@@ -381,7 +406,7 @@ def main(argv=None) -> int:
                             r = run_peer(orb, kind, path, pre, max_frames)
                         except Exception as exc:  # noqa: BLE001 - a failed peer run is a row, not a crash
                             r = {"tracked_pct": None, "ate_rmse_m": None, "error": f"{type(exc).__name__}: {exc}"}
-                        r.update({"dataset": d, "cell": label, "method": tag,
+                        r.update({"dataset": d, "cell": label, "method": tag, "haze_depth": row_haze,
                                   "gain": None if cell is None else cell.effective_gain,
                                   "beta": None if cell is None else (cell.beta if cell.haze else 0.0),
                                   "noise": None if cell is None else label.rsplit("-", 1)[1]})

@@ -9,7 +9,7 @@ from canopy.degrade import (DegradeParams, add_haze, darken, degrade_image, dept
 from canopy.sources import open_source
 from shared.errors import ConfigError, InputError
 from shared.types import StereoCalibration
-from tools.degrade_sequence import degrade_sequence
+from tools.degrade_sequence import degrade_sequence, resolve_haze_depth
 
 FULL_WELL = 4000.0
 READ_NOISE = 4.0
@@ -145,6 +145,15 @@ def test_rendered_haze_depth_needs_a_generated_sequence(tmp_path):
     assert not (tmp_path / "e").exists()  # refused before writing anything
 
 
+def test_haze_depth_auto_is_sgbm_on_real_data():
+    """auto: KITTI and the bundled EuRoC snippet (no rendered depth) get SGBM; a bad name is refused."""
+    assert resolve_haze_depth("auto", "kitti") == "stereo"
+    assert resolve_haze_depth("auto", "euroc") == "stereo"
+    assert resolve_haze_depth("stereo", "euroc") == "stereo"
+    with pytest.raises(ConfigError, match="haze-depth"):
+        resolve_haze_depth("sgbm", "euroc")
+
+
 def test_fill_disparity_takes_the_farther_neighbour():
     disp = np.array([[0, 8, 0, 0, 3, 0], [0, 0, 0, 0, 0, 0]], np.float32)
     assert fill_disparity_background(disp).tolist() == [[8, 8, 3, 3, 3, 3], [0, 0, 0, 0, 0, 0]]
@@ -228,16 +237,18 @@ def test_degraded_euroc_copy_opens_unchanged(tmp_path):
 
 
 def test_rendered_haze_follows_the_exact_depth_in_both_cameras(tmp_path):
-    """--haze-depth rendered on a generated sequence: the haze each camera gets is the model's
-    I t + A (1 - t) with t from the renderer's depth (left) and its warp (right), so the
-    transmission read back from the hazy / clean pair matches exp(-beta * ray) of that depth."""
+    """On a generated sequence the default (--haze-depth auto) is the renderer's depth: the haze each
+    camera gets is the model's I t + A (1 - t) with t from the renderer's depth (left) and its warp
+    (right), so the transmission read back from the hazy / clean pair matches exp(-beta * ray) of that
+    depth."""
     import cv2
 
     from canopy.synthetic import generate_sequence
 
     seq = generate_sequence("day-loop", tmp_path / "seq", n_frames=1, seed=3, workers=1, noise=False)
+    assert resolve_haze_depth("auto", "euroc", seq) == "rendered"
     params = DegradeParams(mode="haze", beta=0.06, airlight=220.0, max_depth=200.0)
-    out = degrade_sequence("euroc", tmp_path / "hazy", params, path=seq, haze_depth="rendered")
+    out = degrade_sequence("euroc", tmp_path / "hazy", params, path=seq)  # default: auto
     clean, hazy = open_source("euroc", seq), open_source("euroc", out)
     c, h = clean.frame(0), hazy.frame(0)
     calib = clean.calibration

@@ -46,3 +46,36 @@ def test_merge_keeps_the_latest_row_of_a_cell(tmp_path):
     assert sorted(r["ate_rmse_m"] for r in autos) == [0.04, 0.05]  # the new rows replaced the old ones
     check = merged["criteria"]["checks"][0]
     assert check["pass"] is True and check["at_least_orb_raw"] is True  # 0.05 <= 1.5 x 0.04, = ORB-SLAM3
+
+
+def test_generated_cells_take_rendered_haze_by_default_and_are_cached_apart(tmp_path):
+    """The grid's default haze depth on a generated preset is the renderer's; its cached copy is named
+    apart from the SGBM-haze copy of the same cell, and a cached copy made from the other depth is
+    refused instead of reused."""
+    import pytest
+    import yaml
+
+    from canopy.degrade import grid_cells
+    from canopy.synthetic import generate_sequence
+
+    seq = generate_sequence("day-loop", tmp_path / "seq", n_frames=1, seed=3, workers=1, noise=False)
+    hazy, dark = grid_cells((1.0,), (0.06,), ("high",)) + grid_cells((0.15,), (0.0,), ("high",))
+    assert grid.cell_haze_depth("auto", "day-loop", "euroc", seq) == "rendered"
+    assert grid.cell_haze_depth("auto", "kitti", "kitti", seq) == "stereo"
+    assert grid.cell_haze_depth("stereo", "day-loop", "euroc", seq) == "stereo"
+    cache = tmp_path / "cells"
+    rendered, tmp1 = grid.degraded_cell("euroc", "day-loop", seq, hazy, 1, tmp_path, cache, "rendered")
+    stereo, tmp2 = grid.degraded_cell("euroc", "day-loop", seq, hazy, 1, tmp_path, cache, "stereo")
+    assert not tmp1 and not tmp2 and rendered != stereo
+    assert yaml.safe_load((rendered / "DEGRADED.yaml").read_text())["haze_depth"] == "rendered"
+    assert yaml.safe_load((stereo / "DEGRADED.yaml").read_text())["haze_depth"] == "stereo"
+    # a cell without haze is the same whatever the haze depth: one copy
+    a, _ = grid.degraded_cell("euroc", "day-loop", seq, dark, 1, tmp_path, cache, "rendered")
+    b, _ = grid.degraded_cell("euroc", "day-loop", seq, dark, 1, tmp_path, cache, "stereo")
+    assert a == b
+    # a stale copy under the rendered name that was hazed from SGBM is not silently reused
+    record = yaml.safe_load((rendered / "DEGRADED.yaml").read_text())
+    record["haze_depth"] = "stereo"
+    (rendered / "DEGRADED.yaml").write_text(yaml.safe_dump(record))
+    with pytest.raises(SystemExit, match="stereo"):
+        grid.degraded_cell("euroc", "day-loop", seq, hazy, 1, tmp_path, cache, "rendered")

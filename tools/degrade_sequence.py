@@ -23,8 +23,10 @@ the mirrored pair).
 EuRoC (raw, distorted images): the whole folder is copied (``mav0`` with
 ``sensor.yaml``, ``imu0``, ground truth, and top-level notes) except the
 camera PNGs, which are written degraded *as raw images*, so a reader
-rectifies them exactly as it rectified the original. Haze depth: SGBM on the
-clean pair as the source rectifies it, converted to ray length (unchanged by
+rectifies them exactly as it rectified the original. Haze depth (``--haze-depth
+auto``, the default): a generated sequence's own rendered depth (``mav0/depth0``,
+the left camera's, warped to the right one by its disparity), otherwise SGBM on the
+clean pair as the source rectifies it; either is converted to ray length (unchanged by
 rectification, which only rotates about the camera centre) and taken back to
 every raw pixel: each raw pixel is undistorted and rotated into the
 rectified image with ``cv2.undistortPoints`` (iterated to 1e-8) (the exact inverse of the
@@ -238,21 +240,53 @@ def _csv_name(line: str) -> str:
 
 # -- entry points ------------------------------------------------------------------------
 
-def degrade_sequence(dataset: str, out: str | Path, params: DegradeParams, path: str | Path | None = None,
-                     max_frames: int | None = None, force: bool = False, progress: bool = False,
-                     haze_depth: str = "stereo") -> Path:
-    """Write the degraded copy of ``dataset`` at ``path`` (None: bundled) to ``out``; return ``out``.
+HAZE_DEPTHS = ("auto", "stereo", "rendered")
 
-    ``haze_depth``: ``stereo`` (SGBM on the clean pair, any dataset) or ``rendered`` (the renderer's
-    exact left depth, ``mav0/depth0`` of a generated sequence; needed where the clean pair is too dark
-    for SGBM, e.g. dark-rows: docs/notes/s8-haze.md)."""
+
+def _depth_dir(src) -> Path:
+    """Where a generated (EuRoC-layout) sequence keeps the renderer's left depth (uint16 mm PNGs)."""
+    return src.left_paths[0].parents[2] / "depth0" / "data"
+
+
+def _check_haze_depth(haze_depth: str, dataset: str) -> None:
     if dataset not in ("euroc", "kitti"):
         raise ConfigError("--dataset", f"must be euroc or kitti, got {dataset!r}")
-    if haze_depth not in ("stereo", "rendered") or (haze_depth == "rendered" and dataset != "euroc"):
-        raise ConfigError("--haze-depth", f"must be 'stereo', or 'rendered' for a generated (euroc-layout) "
-                                          f"sequence, got {haze_depth!r} for {dataset}")
+    if haze_depth not in HAZE_DEPTHS:
+        raise ConfigError("--haze-depth", f"must be one of {', '.join(HAZE_DEPTHS)}, got {haze_depth!r}")
+    if haze_depth == "rendered" and dataset != "euroc":
+        raise ConfigError("--haze-depth", f"'rendered' needs a generated (euroc-layout) sequence, got {dataset}")
+
+
+def resolve_haze_depth(haze_depth: str, dataset: str, path: str | Path | None = None, src=None) -> str:
+    """``stereo`` or ``rendered``: the depth the haze of ``dataset`` at ``path`` is made from.
+
+    ``auto`` (the default) takes the renderer's exact depth where the sequence has it (generated
+    sequences, ``mav0/depth0``) and SGBM on the clean pair otherwise (real data): SGBM depth of a
+    generated pair is blocky, has holes (painted as ``max_depth`` streaks) and differs between the
+    two cameras, so the haze itself adds texture that is not in the scene (docs/notes/s8-haze.md,
+    the dark-rows cell). ``stereo`` / ``rendered`` force one (``rendered`` on KITTI is an error)."""
+    _check_haze_depth(haze_depth, dataset)
+    if haze_depth != "auto":
+        return haze_depth
+    if dataset != "euroc":
+        return "stereo"
+    src = src if src is not None else open_source(dataset, path, max_frames=1)
+    return "rendered" if _depth_dir(src).is_dir() else "stereo"
+
+
+def degrade_sequence(dataset: str, out: str | Path, params: DegradeParams, path: str | Path | None = None,
+                     max_frames: int | None = None, force: bool = False, progress: bool = False,
+                     haze_depth: str = "auto") -> Path:
+    """Write the degraded copy of ``dataset`` at ``path`` (None: bundled) to ``out``; return ``out``.
+
+    ``haze_depth``: ``auto`` (the renderer's depth where the sequence has it, else SGBM:
+    ``resolve_haze_depth``), ``stereo`` (SGBM on the clean pair, any dataset) or ``rendered`` (the
+    renderer's exact left depth, ``mav0/depth0`` of a generated sequence; needed where the clean pair
+    is too dark for SGBM, e.g. dark-rows: docs/notes/s8-haze.md). DEGRADED.yaml records the one used."""
+    _check_haze_depth(haze_depth, dataset)  # bad names fail before the source is opened
     src = open_source(dataset, path, max_frames=max_frames)
-    depth_dir = src.left_paths[0].parents[2] / "depth0" / "data" if dataset == "euroc" else None
+    haze_depth = resolve_haze_depth(haze_depth, dataset, src=src)
+    depth_dir = _depth_dir(src) if dataset == "euroc" else None
     if params.haze and haze_depth == "rendered" and not depth_dir.is_dir():  # before anything is written
         raise InputError(depth_dir, "--haze-depth rendered needs the renderer's depth (mav0/depth0, generated sequences)")
     out = Path(out)
@@ -294,8 +328,9 @@ def main(argv=None) -> int:
     ap.add_argument("--num-disparities", type=int, default=d.num_disparities)
     ap.add_argument("--block-size", type=int, default=d.block_size)
     ap.add_argument("--seed", type=int, default=d.seed)
-    ap.add_argument("--haze-depth", choices=("stereo", "rendered"), default="stereo",
-                    help="haze depth: SGBM on the clean pair, or the renderer's depth (generated sequences)")
+    ap.add_argument("--haze-depth", choices=HAZE_DEPTHS, default="auto",
+                    help="haze depth: the renderer's depth where the sequence has it (generated sequences), "
+                         "else SGBM on the clean pair (auto, default); or force SGBM (stereo) / rendered")
     ap.add_argument("--max-frames", type=int, default=None)
     ap.add_argument("--force", action="store_true", help="replace a non-empty output folder")
     args = ap.parse_args(argv)
