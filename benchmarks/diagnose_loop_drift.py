@@ -23,6 +23,7 @@ import argparse
 import json
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +37,7 @@ from canopy.loop import closer as closer_mod  # noqa: E402
 from canopy.loop.sequential import run_sequential_with_loops  # noqa: E402
 from canopy.loop.vocabulary import load_vocabulary  # noqa: E402
 from canopy.metrics import align_trajectory, ape  # noqa: E402
+from canopy.enhance.pair import PairEnhancer  # noqa: E402
 from canopy.sources import open_source  # noqa: E402
 
 
@@ -51,6 +53,28 @@ def constraint_error(c, gt: np.ndarray) -> tuple[float, float]:
     T_true = se3_inv(gt[c.candidate]) @ gt[c.query]
     E = se3_inv(T_true) @ c.T_cand_query
     return float(np.linalg.norm(E[:3, 3])), float(np.degrees(rotation_angle(E[:3, :3])))
+
+
+class EnhancedSource:
+    """The source with every pair through ``PairEnhancer`` (what the enhancement actor does), so that
+    the in-process reference sees the images tracking sees through the actors (dusk-loop: ``auto``)."""
+
+    def __init__(self, source, params):
+        self.source = source
+        self.enhancer = PairEnhancer(replace(params, pair_threads=1))
+        self.methods: dict[str, int] = {}
+
+    def __len__(self):
+        return len(self.source)
+
+    def __getattr__(self, name):
+        return getattr(self.source, name)
+
+    def frame(self, i):
+        f = self.source.frame(i)
+        left, right, info = self.enhancer(f.left, f.right)
+        self.methods[info["method"]] = self.methods.get(info["method"], 0) + 1
+        return replace(f, left=left, right=right)
 
 
 class Recorder:
@@ -105,10 +129,14 @@ def main() -> int:
     ap.add_argument("--dataset", default="synthetic", help="config to start from (configs/<dataset>.yaml)")
     ap.add_argument("--set", action="append", default=[], help="section.field=value override (repeatable)")
     ap.add_argument("--max-frames", type=int, default=None)
+    ap.add_argument("--enhance", action="store_true",
+                    help="run the config's enhancement on every pair first (as the actors do; off: raw frames)")
     ap.add_argument("--json", default=None, help="write the numbers here")
     args = ap.parse_args()
     cfg = with_settings(load_run_config(args.dataset), [parse_setting(s) for s in args.set])
     src = open_source("euroc" if args.dataset == "synthetic" else args.dataset, args.path, max_frames=args.max_frames)
+    if args.enhance:
+        src = EnhancedSource(src, cfg.enhancement)
     n = len(src) if args.max_frames is None else min(len(src), args.max_frames)
     gt = src.ground_truth.poses[:n]
     rec = Recorder(gt)
@@ -129,6 +157,8 @@ def main() -> int:
               f"{r['ate_before']:.4f} -> pose graph {r['ate_pgo']:.4f} -> full BA {r.get('ate_ba', float('nan')):.4f} "
               f"(BA {r.get('ba_edges', 0)} edges, {r.get('ba_outliers', 0)} outliers, sigma {r.get('ba_sigma', float('nan')):.2f} px)")
     print(f"detection: {res.detection}")
+    if args.enhance:
+        print(f"enhancement: {src.methods}")
     print(f"frame ATE {a['rmse']:.4f} m (max {a['max']:.3f}), x/y/z rms {axes[0]:.4f} / {axes[1]:.4f} / {axes[2]:.4f}, "
           f"keyframes {len(res.keyframe_trajectory.poses)}, loops {len(res.closures)}, wall {wall:.0f} s")
     if args.json:

@@ -263,7 +263,14 @@ def fuse_across_loop(keyframes: dict[int, PlaceKeyframe], poses: dict[int, np.nd
     of the loop is projected into each keyframe of the query side (poses already corrected)
     and matched by descriptor in a small window; a keypoint there that observes another
     landmark observes a duplicate of the same tree, which becomes the older landmark.
-    Returns the new fusions {duplicate -> kept} (also added to ``alias``)."""
+    Returns the new fusions {duplicate -> kept} (also added to ``alias``). Without
+    ``params.fuse_bearing_only`` only keypoints measured in stereo take part on either side."""
+    def usable(kf: PlaceKeyframe, lids: np.ndarray) -> np.ndarray:
+        ok = lids >= 0
+        if not params.fuse_bearing_only:
+            ok &= np.asarray(kf.u_right, float) >= 0
+        return ok
+
     # candidate-side landmarks with a descriptor: that of the keypoint in the keyframe that saw it first
     lm_desc: dict[int, np.ndarray] = {}
     for k in sorted(candidate_group):
@@ -271,7 +278,7 @@ def fuse_across_loop(keyframes: dict[int, PlaceKeyframe], poses: dict[int, np.nd
         if kf is None:
             continue
         lids = resolve_array(kf.landmark_ids, alias)
-        for i in np.flatnonzero(lids >= 0).tolist():
+        for i in np.flatnonzero(usable(kf, lids)).tolist():
             lid = int(lids[i])
             if lid not in lm_desc and lid in positions:
                 lm_desc[lid] = kf.descriptors[i]
@@ -299,9 +306,10 @@ def fuse_across_loop(keyframes: dict[int, PlaceKeyframe], poses: dict[int, np.nd
                                     as_words(kf.descriptors), params.fuse_max_hamming, params.match_ratio,
                                     q_mask=in_view)
         lids = resolve_array(kf.landmark_ids, alias)
+        ok = usable(kf, lids)
         for a, r in zip(qi.tolist(), ri.tolist()):
             mine, theirs = int(lids[r]), int(c_ids[a])
-            if mine < 0 or mine == theirs or mine in c_set:
+            if not ok[r] or mine == theirs or mine in c_set:
                 continue
             keep, drop = min(mine, theirs), max(mine, theirs)  # the older landmark stays
             if resolve(drop, alias) != drop or drop in fused:

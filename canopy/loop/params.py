@@ -108,6 +108,10 @@ class LoopParams:
     fuse_neighbours: int = 10             # best covisible keyframes on each side of the loop
     fuse_radius: float = 4.0              # px search window around the projection
     fuse_max_hamming: int = 50
+    # False: only keypoints measured in stereo (u_right >= 0) take part in the fusion on either
+    # side; a contour (bearing-only) landmark fused with a stereo keypoint across the loop gets a
+    # stereo edge and is back in the full BA although its position is a silhouette's (s9-drift)
+    fuse_bearing_only: bool = True
     # ORB-SLAM CorrectLoop order: the query side is first moved rigidly by the verified loop
     # pose, the duplicates are fused, and the keyframe pairs the fusion links across the loop
     # (>= loop_connection_min_shared fused landmarks) become extra loop edges of the pose graph
