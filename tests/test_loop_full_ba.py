@@ -395,3 +395,36 @@ def test_loop_closer_keeps_no_depth_for_bearing_only_keypoints(lap, stereo_only)
             assert np.array_equal(stored.depth[bearing], kfs[k].depth[bearing])
         assert np.array_equal(stored.depth[~bearing], kfs[k].depth[~bearing])
     assert MonoLoopCloser(CALIB, LoopParams()).params.verify_stereo_only is False
+
+
+@pytest.mark.parametrize("fuse_bearing_only", [True, False])
+def test_fusion_leaves_bearing_only_keypoints_alone_when_asked(lap, fuse_bearing_only):
+    """loop.fuse_bearing_only false: a keypoint tracking measured bearing-only (u_right -1, a contour
+    landmark's) takes part in the fusion on neither side of the loop, so a silhouette landmark is not
+    merged with a stereo one (which would give it a stereo edge and put it back in the full BA); the
+    stereo keypoints' duplicates are fused as before. True: every duplicate, as before."""
+    from dataclasses import replace as dc_replace
+
+    rng = np.random.default_rng(11)
+    sil = set(np.flatnonzero(rng.random(len(lap["X"])) < 0.4).tolist())
+    kfs = {}
+    for k, kf in lap["keyframes"].items():
+        ur = kf.u_right.copy()
+        ur[np.isin(kf.landmark_ids % 10000, list(sil))] = -1.0   # bearing-only in every keyframe
+        kfs[k] = dc_replace(kf, u_right=ur)
+    positions = dict(lap["positions"])
+    for j in range(len(lap["X"])):
+        for lid in (j, 10000 + j):
+            if lid in positions:
+                positions[lid] = lap["X"][j]
+    fused = fuse_across_loop(kfs, lap["gt"], positions, list(range(FIRST_LATE, N_KF)), list(range(0, 5)), CALIB,
+                             dc_replace(LoopParams(), fuse_bearing_only=fuse_bearing_only), {})
+    truth = {10000 + j: j for j in lap["duplicated"]}
+    assert all(truth.get(d) == k for d, k in fused.items())
+    on_silhouettes = {k for k in fused.values() if k in sil}
+    stereo_truth = {d for d, k in truth.items() if k not in sil}
+    assert len([d for d in fused if d in stereo_truth]) >= 0.8 * len(stereo_truth)
+    if fuse_bearing_only:
+        assert len(on_silhouettes) >= 0.8 * len(set(truth.values()) & sil) > 10
+    else:
+        assert not on_silhouettes
