@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import pickle
 import sys
 import time
 from dataclasses import replace
@@ -80,8 +81,9 @@ class EnhancedSource:
 class Recorder:
     """Wraps ``LoopCloser.close_loop`` / ``accept_ba`` of the closer the runner builds."""
 
-    def __init__(self, gt: np.ndarray):
+    def __init__(self, gt: np.ndarray, record_path: str | None = None):
         self.gt = gt
+        self.record_path = record_path
         self.rows: list[dict] = []
         self.closer = None
 
@@ -95,6 +97,9 @@ class Recorder:
             rec.closer = self
 
         def close_loop(self, constraint, t_detect=0.0):
+            if rec.record_path and not rec.rows:  # the closer as the first loop finds it (--record)
+                with open(rec.record_path, "wb") as f:
+                    pickle.dump({"closer": self, "constraint": constraint, "gt": rec.gt}, f)
             before = kf_ate(self.poses, rec.gt)
             q, c = self.detector.keyframes[constraint.query], self.detector.keyframes[constraint.candidate]
             contour_q = (np.asarray(q.depth) > 0) & (np.asarray(q.u_right) < 0)
@@ -123,9 +128,38 @@ class Recorder:
         # the runner imported the class itself: its name points at the same class object
 
 
+def replay_first_loop(path: str, settings: list[str]) -> int:
+    """--replay: the loop closer recorded at its first loop (--record), closed again with ``--set
+    loop.*`` overrides of the correction (fusion, pose graph, full BA): keyframe ATE before, after
+    the pose graph and after the full BA. Detection and the odometry up to that loop are the
+    recorded ones, so this compares the correction alone, in a minute instead of a whole run."""
+    with open(path, "rb") as f:
+        rec = pickle.load(f)
+    closer, constraint, gt = rec["closer"], rec["constraint"], rec["gt"]
+    over = {}
+    for s in settings:
+        section, field, value = parse_setting(s)
+        if section != "loop":
+            raise SystemExit(f"--replay takes loop.* settings only (got {s!r}): the odometry is recorded")
+        over[field] = value
+    closer.params = replace(closer.params, **over)
+    before = kf_ate(closer.poses, gt)
+    t0 = time.perf_counter()
+    closure = closer.close_loop(constraint)
+    pgo = kf_ate(closer.poses, gt)
+    ba = closer.global_bundle_adjust()
+    print(f"replay {path} {settings or ''}: loop kf {constraint.query} -> {constraint.candidate}, fused "
+          f"{len(closure.fused)}, connections {int(closure.timings_ms.get('loop_connections', 0))}; kf ATE before "
+          f"{before:.4f} -> pose graph {pgo:.4f} -> full BA {kf_ate(closer.poses, gt):.4f} "
+          f"(BA {ba.n_edges if ba else 0} edges, {ba.n_outliers if ba else 0} outliers), {time.perf_counter() - t0:.0f} s")
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--path", required=True, help="generated sequence folder (EuRoC layout with ground truth)")
+    ap.add_argument("--record", default=None, help="pickle the loop closer as the first loop finds it here")
+    ap.add_argument("--replay", default=None, help="close a --record'ed first loop again with --set loop.* (fast)")
+    ap.add_argument("--path", help="generated sequence folder (EuRoC layout with ground truth)")
     ap.add_argument("--dataset", default="synthetic", help="config to start from (configs/<dataset>.yaml)")
     ap.add_argument("--set", action="append", default=[], help="section.field=value override (repeatable)")
     ap.add_argument("--max-frames", type=int, default=None)
@@ -133,13 +167,17 @@ def main() -> int:
                     help="run the config's enhancement on every pair first (as the actors do; off: raw frames)")
     ap.add_argument("--json", default=None, help="write the numbers here")
     args = ap.parse_args()
+    if args.replay:
+        return replay_first_loop(args.replay, args.set)
+    if not args.path:
+        ap.error("--path is required (except with --replay)")
     cfg = with_settings(load_run_config(args.dataset), [parse_setting(s) for s in args.set])
     src = open_source("euroc" if args.dataset == "synthetic" else args.dataset, args.path, max_frames=args.max_frames)
     if args.enhance:
         src = EnhancedSource(src, cfg.enhancement)
     n = len(src) if args.max_frames is None else min(len(src), args.max_frames)
     gt = src.ground_truth.poses[:n]
-    rec = Recorder(gt)
+    rec = Recorder(gt, args.record)
     rec.install()
     t0 = time.perf_counter()
     res = run_sequential_with_loops(src, load_vocabulary(cfg.loop.vocabulary or None), cfg.tracking, cfg.mapping,
