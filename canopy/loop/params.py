@@ -79,13 +79,6 @@ class LoopParams:
     essential_min_shared: int = 100       # covisibility edges of the essential graph (ORB-SLAM)
     odometry_sigma_rot: float = 0.01      # rad; relative poses from the map are precise
     odometry_sigma_trans: float = 0.01    # m
-    # > 0: odometry and covisibility edges are weighted by the distance their two keyframes are
-    # apart, d: both sigmas times sqrt(max(d, 0.1 D) / D), D this distance (m). A random-walk
-    # drift has a variance growing with the distance travelled, and a scale error (odometry
-    # too long by a fixed fraction) is a correction proportional to distance: with the variance
-    # proportional to d the graph spreads it per metre instead of per edge (covisibility edges
-    # with the uniform sigmas are stiffer where keyframes are dense). 0: uniform sigmas.
-    odometry_sigma_distance_m: float = 0.0
     loop_sigma_rot: float = 0.01
     loop_sigma_trans: float = 0.02
     robust_kernel_k: float = math.sqrt(CHI2_95_3DOF * 2)  # Huber width on whitened 6-d errors
@@ -170,7 +163,6 @@ class LoopParams:
         need(self.refine_rounds >= 1 and self.refine_iterations >= 1, "refine_rounds", "and refine_iterations must be >= 1")
         need(min(self.odometry_sigma_rot, self.odometry_sigma_trans, self.loop_sigma_rot,
                  self.loop_sigma_trans) > 0, "odometry_sigma_rot", "and all pose-graph sigmas must be > 0")
-        need(self.odometry_sigma_distance_m >= 0, "odometry_sigma_distance_m", "must be >= 0")
         need(self.robust_kernel_k > 0, "robust_kernel_k", "must be > 0")
         need(self.full_ba_iterations >= 1 and self.full_ba_passes >= 1, "full_ba_iterations",
              "and full_ba_passes must be >= 1")

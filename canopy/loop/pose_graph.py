@@ -79,15 +79,9 @@ def optimise_pose_graph(poses: dict[int, np.ndarray], edges: list[PoseGraphEdge]
         for kind, sr, st in ((ODOMETRY, params.odometry_sigma_rot, params.odometry_sigma_trans),
                              (COVISIBILITY, params.odometry_sigma_rot, params.odometry_sigma_trans),
                              (LOOP, params.loop_sigma_rot, params.loop_sigma_trans))}
-    D = params.odometry_sigma_distance_m
     for e in edges:
         if e.i in poses and e.j in poses:
-            model = noise[e.kind]
-            if D > 0 and e.kind != LOOP:  # LoopParams.odometry_sigma_distance_m: variance ~ distance
-                f = np.sqrt(max(float(np.linalg.norm(np.asarray(e.T_i_j)[:3, 3])), 0.1 * D) / D)
-                model = gtsam.noiseModel.Robust.Create(huber, gtsam.noiseModel.Diagonal.Sigmas(
-                    f * np.array([params.odometry_sigma_rot] * 3 + [params.odometry_sigma_trans] * 3)))
-            graph.add(gtsam.BetweenFactorPose3(X(e.i), X(e.j), gtsam.Pose3(np.asarray(e.T_i_j, float)), model))
+            graph.add(gtsam.BetweenFactorPose3(X(e.i), X(e.j), gtsam.Pose3(np.asarray(e.T_i_j, float)), noise[e.kind]))
     lm = gtsam.LevenbergMarquardtParams()
     lm.setMaxIterations(params.pgo_max_iterations)
     optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, lm)
