@@ -428,3 +428,20 @@ def test_fusion_leaves_bearing_only_keypoints_alone_when_asked(lap, fuse_bearing
         assert len(on_silhouettes) >= 0.8 * len(set(truth.values()) & sil) > 10
     else:
         assert not on_silhouettes
+
+
+def test_full_ba_down_weights_bearing_only_landmarks_by_the_sigma_factor(lap):
+    """loop.full_ba_bearing_only_sigma_factor: the sliding silhouette landmarks stay in the full BA
+    but their edges count with a wider pixel sigma; they pull the lap off much less than at the
+    stereo points' sigma. Factor 1 is the plain BA."""
+    from dataclasses import replace as dc_replace
+
+    alias = {10000 + j: j for j in lap["duplicated"]}
+    kfs, sil = _with_sliding_silhouettes(lap, share=0.4, slide_m=0.3)
+    runs = {f: global_bundle_adjust(kfs, lap["drifted"], lap["positions"], CALIB,
+                                    dc_replace(LoopParams(), full_ba_bearing_only_sigma_factor=f), alias=dict(alias),
+                                    fixed=0) for f in (1.0, 20.0)}
+    err = {f: _max_errors(r.poses, lap["gt"])[0] for f, r in runs.items()}
+    print(f"silhouettes at factor 1: {err[1.0]:.3f} m, at factor 20: {err[20.0]:.4f} m")
+    assert {int(l) % 10000 for l in runs[20.0].landmark_ids.tolist()} & sil   # still in the BA
+    assert err[20.0] < 0.25 * err[1.0]

@@ -154,19 +154,23 @@ def global_bundle_adjust(keyframes: dict[int, PlaceKeyframe], poses: dict[int, n
         ur[m] = np.asarray(kf.u_right, float)[e_kp[m]]
         octv[m] = np.asarray(kf.octave, np.int64)[e_kp[m]]
     stereo = ur >= 0
-    level_scale = params.scale_factor ** octv.astype(float)
+    # edges of landmarks no keyframe measured in stereo (LoopParams.full_ba_bearing_only_sigma_factor)
+    _, lm_inv = np.unique(e_lm, return_inverse=True)
+    bearing_lm = np.bincount(lm_inv, weights=stereo.astype(float))[lm_inv] == 0 if n else np.zeros(0, bool)
+    edge_factor = np.where(bearing_lm, params.full_ba_bearing_only_sigma_factor, 1.0)
+    level_scale = params.scale_factor ** octv.astype(float) * edge_factor
     pixel_sigma = float(params.pixel_sigma)
     lm_ids = np.unique(e_lm)
     K = gtsam.Cal3_S2Stereo(calib.fx, calib.fy, 0.0, calib.cx, calib.cy, calib.baseline)
     Kmono = gtsam.Cal3_S2(calib.fx, calib.fy, 0.0, calib.cx, calib.cy)
     noise_cache: dict = {}
 
-    def noise(is_stereo: bool, o: int):
-        m = noise_cache.get((is_stereo, o, pixel_sigma))
+    def noise(is_stereo: bool, o: int, factor: float = 1.0):
+        m = noise_cache.get((is_stereo, o, pixel_sigma, factor))
         if m is None:
-            base = gtsam.noiseModel.Isotropic.Sigma(3 if is_stereo else 2, pixel_sigma * params.scale_factor**o)
+            base = gtsam.noiseModel.Isotropic.Sigma(3 if is_stereo else 2, pixel_sigma * params.scale_factor**o * factor)
             hub = gtsam.noiseModel.mEstimator.Huber.Create(np.sqrt(params.chi2_stereo if is_stereo else params.chi2_mono))
-            m = noise_cache[(is_stereo, o, pixel_sigma)] = gtsam.noiseModel.Robust.Create(hub, base)
+            m = noise_cache[(is_stereo, o, pixel_sigma, factor)] = gtsam.noiseModel.Robust.Create(hub, base)
         return m
 
     kf_ids = sorted(set(np.unique(e_kf).tolist()) | {fixed})
@@ -190,7 +194,8 @@ def global_bundle_adjust(keyframes: dict[int, PlaceKeyframe], poses: dict[int, n
                                                       noise(True, int(octv[j])), X(int(e_kf[j])), L(int(e_lm[j])), K))
             else:
                 graph.add(gtsam.GenericProjectionFactorCal3_S2(gtsam.Point2(uv[j, 0], uv[j, 1]),
-                                                               noise(False, int(octv[j])), X(int(e_kf[j])),
+                                                               noise(False, int(octv[j]), float(edge_factor[j])),
+                                                               X(int(e_kf[j])),
                                                                L(int(e_lm[j])), Kmono))
         t_build += time.perf_counter() - tb
         lm_params = gtsam.LevenbergMarquardtParams()
@@ -222,6 +227,8 @@ def global_bundle_adjust(keyframes: dict[int, PlaceKeyframe], poses: dict[int, n
             # then pull the second pass. Estimated on the edges that pass the assumed test.
             inl = active & (err2 / pixel_sigma**2 <= bound)
             n_par = 3 * len(np.unique(e_lm[inl])) + 6 * max(len(np.unique(e_kf[inl])) - 1, 0)
+            if params.full_ba_bearing_only_sigma_factor != 1.0:  # the noise of the edges at pixel_sigma
+                inl = inl & ~bearing_lm
             est = estimate_pixel_noise(res, octv, params.scale_factor, inl, n_par)
             if np.isfinite(est):
                 est = float(np.clip(est, params.full_ba_noise_min_px, params.full_ba_noise_max_px))

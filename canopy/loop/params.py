@@ -102,6 +102,9 @@ class LoopParams:
     # landmarks, tracking.contour_landmarks) stay out of the full BA and move with their reference
     # keyframe; their position is the stereo depth of a silhouette, no 3D point's (s8-drift)
     full_ba_bearing_only_landmarks: bool = True
+    # their edges' pixel sigma times this when they are in it (a silhouette's bearings agree over
+    # short baselines only): > 1 keeps their rotation information with less pull on the poses
+    full_ba_bearing_only_sigma_factor: float = 1.0
     # landmark fusion across the loop (ORB-SLAM SearchAndFuse): candidate-side landmarks
     # projected into the query side's keyframes after the correction
     fuse: bool = True
@@ -168,6 +171,7 @@ class LoopParams:
              "and full_ba_passes must be >= 1")
         need(0 < self.full_ba_noise_min_px <= self.full_ba_noise_max_px, "full_ba_noise_min_px",
              "must be > 0 and <= full_ba_noise_max_px")
+        need(self.full_ba_bearing_only_sigma_factor > 0, "full_ba_bearing_only_sigma_factor", "must be > 0")
         need(self.full_ba_min_observations >= 1, "full_ba_min_observations", "must be >= 1")
         need(self.fuse_neighbours >= 0, "fuse_neighbours", "must be >= 0")
         need(self.fuse_radius > 0, "fuse_radius", "must be > 0")
