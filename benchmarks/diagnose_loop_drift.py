@@ -151,7 +151,8 @@ def replay_first_loop(path: str, settings: list[str]) -> int:
     print(f"replay {path} {settings or ''}: loop kf {constraint.query} -> {constraint.candidate}, fused "
           f"{len(closure.fused)}, connections {int(closure.timings_ms.get('loop_connections', 0))}; kf ATE before "
           f"{before:.4f} -> pose graph {pgo:.4f} -> full BA {kf_ate(closer.poses, gt):.4f} "
-          f"(BA {ba.n_edges if ba else 0} edges, {ba.n_outliers if ba else 0} outliers), {time.perf_counter() - t0:.0f} s")
+          f"(BA {ba.n_edges if ba else 0} edges, {ba.n_outliers if ba else 0} outliers, error "
+          f"{ba.initial_error if ba else 0:.4g} -> {ba.final_error if ba else 0:.4g}), {time.perf_counter() - t0:.0f} s")
     return 0
 
 
