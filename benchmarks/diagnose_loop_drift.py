@@ -21,8 +21,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import pickle
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +38,7 @@ from canopy.loop import closer as closer_mod  # noqa: E402
 from canopy.loop.sequential import run_sequential_with_loops  # noqa: E402
 from canopy.loop.vocabulary import load_vocabulary  # noqa: E402
 from canopy.metrics import align_trajectory, ape  # noqa: E402
+from canopy.enhance.pair import PairEnhancer  # noqa: E402
 from canopy.sources import open_source  # noqa: E402
 
 
@@ -53,11 +56,34 @@ def constraint_error(c, gt: np.ndarray) -> tuple[float, float]:
     return float(np.linalg.norm(E[:3, 3])), float(np.degrees(rotation_angle(E[:3, :3])))
 
 
+class EnhancedSource:
+    """The source with every pair through ``PairEnhancer`` (what the enhancement actor does), so that
+    the in-process reference sees the images tracking sees through the actors (dusk-loop: ``auto``)."""
+
+    def __init__(self, source, params):
+        self.source = source
+        self.enhancer = PairEnhancer(replace(params, pair_threads=1))
+        self.methods: dict[str, int] = {}
+
+    def __len__(self):
+        return len(self.source)
+
+    def __getattr__(self, name):
+        return getattr(self.source, name)
+
+    def frame(self, i):
+        f = self.source.frame(i)
+        left, right, info = self.enhancer(f.left, f.right)
+        self.methods[info["method"]] = self.methods.get(info["method"], 0) + 1
+        return replace(f, left=left, right=right)
+
+
 class Recorder:
     """Wraps ``LoopCloser.close_loop`` / ``accept_ba`` of the closer the runner builds."""
 
-    def __init__(self, gt: np.ndarray):
+    def __init__(self, gt: np.ndarray, record_path: str | None = None):
         self.gt = gt
+        self.record_path = record_path
         self.rows: list[dict] = []
         self.closer = None
 
@@ -71,6 +97,9 @@ class Recorder:
             rec.closer = self
 
         def close_loop(self, constraint, t_detect=0.0):
+            if rec.record_path and not rec.rows:  # the closer as the first loop finds it (--record)
+                with open(rec.record_path, "wb") as f:
+                    pickle.dump({"closer": self, "constraint": constraint, "gt": rec.gt}, f)
             before = kf_ate(self.poses, rec.gt)
             q, c = self.detector.keyframes[constraint.query], self.detector.keyframes[constraint.candidate]
             contour_q = (np.asarray(q.depth) > 0) & (np.asarray(q.u_right) < 0)
@@ -99,19 +128,57 @@ class Recorder:
         # the runner imported the class itself: its name points at the same class object
 
 
+def replay_first_loop(path: str, settings: list[str]) -> int:
+    """--replay: the loop closer recorded at its first loop (--record), closed again with ``--set
+    loop.*`` overrides of the correction (fusion, pose graph, full BA): keyframe ATE before, after
+    the pose graph and after the full BA. Detection and the odometry up to that loop are the
+    recorded ones, so this compares the correction alone, in a minute instead of a whole run."""
+    with open(path, "rb") as f:
+        rec = pickle.load(f)
+    closer, constraint, gt = rec["closer"], rec["constraint"], rec["gt"]
+    over = {}
+    for s in settings:
+        section, field, value = parse_setting(s)
+        if section != "loop":
+            raise SystemExit(f"--replay takes loop.* settings only (got {s!r}): the odometry is recorded")
+        over[field] = value
+    closer.params = replace(closer.params, **over)
+    before = kf_ate(closer.poses, gt)
+    t0 = time.perf_counter()
+    closure = closer.close_loop(constraint)
+    pgo = kf_ate(closer.poses, gt)
+    ba = closer.global_bundle_adjust()
+    print(f"replay {path} {settings or ''}: loop kf {constraint.query} -> {constraint.candidate}, fused "
+          f"{len(closure.fused)}, connections {int(closure.timings_ms.get('loop_connections', 0))}; kf ATE before "
+          f"{before:.4f} -> pose graph {pgo:.4f} -> full BA {kf_ate(closer.poses, gt):.4f} "
+          f"(BA {ba.n_edges if ba else 0} edges, {ba.n_outliers if ba else 0} outliers, error "
+          f"{ba.initial_error if ba else 0:.4g} -> {ba.final_error if ba else 0:.4g}), {time.perf_counter() - t0:.0f} s")
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--path", required=True, help="generated sequence folder (EuRoC layout with ground truth)")
+    ap.add_argument("--record", default=None, help="pickle the loop closer as the first loop finds it here")
+    ap.add_argument("--replay", default=None, help="close a --record'ed first loop again with --set loop.* (fast)")
+    ap.add_argument("--path", help="generated sequence folder (EuRoC layout with ground truth)")
     ap.add_argument("--dataset", default="synthetic", help="config to start from (configs/<dataset>.yaml)")
     ap.add_argument("--set", action="append", default=[], help="section.field=value override (repeatable)")
     ap.add_argument("--max-frames", type=int, default=None)
+    ap.add_argument("--enhance", action="store_true",
+                    help="run the config's enhancement on every pair first (as the actors do; off: raw frames)")
     ap.add_argument("--json", default=None, help="write the numbers here")
     args = ap.parse_args()
+    if args.replay:
+        return replay_first_loop(args.replay, args.set)
+    if not args.path:
+        ap.error("--path is required (except with --replay)")
     cfg = with_settings(load_run_config(args.dataset), [parse_setting(s) for s in args.set])
     src = open_source("euroc" if args.dataset == "synthetic" else args.dataset, args.path, max_frames=args.max_frames)
+    if args.enhance:
+        src = EnhancedSource(src, cfg.enhancement)
     n = len(src) if args.max_frames is None else min(len(src), args.max_frames)
     gt = src.ground_truth.poses[:n]
-    rec = Recorder(gt)
+    rec = Recorder(gt, args.record)
     rec.install()
     t0 = time.perf_counter()
     res = run_sequential_with_loops(src, load_vocabulary(cfg.loop.vocabulary or None), cfg.tracking, cfg.mapping,
@@ -129,6 +196,8 @@ def main() -> int:
               f"{r['ate_before']:.4f} -> pose graph {r['ate_pgo']:.4f} -> full BA {r.get('ate_ba', float('nan')):.4f} "
               f"(BA {r.get('ba_edges', 0)} edges, {r.get('ba_outliers', 0)} outliers, sigma {r.get('ba_sigma', float('nan')):.2f} px)")
     print(f"detection: {res.detection}")
+    if args.enhance:
+        print(f"enhancement: {src.methods}")
     print(f"frame ATE {a['rmse']:.4f} m (max {a['max']:.3f}), x/y/z rms {axes[0]:.4f} / {axes[1]:.4f} / {axes[2]:.4f}, "
           f"keyframes {len(res.keyframe_trajectory.poses)}, loops {len(res.closures)}, wall {wall:.0f} s")
     if args.json:

@@ -395,3 +395,53 @@ def test_loop_closer_keeps_no_depth_for_bearing_only_keypoints(lap, stereo_only)
             assert np.array_equal(stored.depth[bearing], kfs[k].depth[bearing])
         assert np.array_equal(stored.depth[~bearing], kfs[k].depth[~bearing])
     assert MonoLoopCloser(CALIB, LoopParams()).params.verify_stereo_only is False
+
+
+@pytest.mark.parametrize("fuse_bearing_only", [True, False])
+def test_fusion_leaves_bearing_only_keypoints_alone_when_asked(lap, fuse_bearing_only):
+    """loop.fuse_bearing_only false: a keypoint tracking measured bearing-only (u_right -1, a contour
+    landmark's) takes part in the fusion on neither side of the loop, so a silhouette landmark is not
+    merged with a stereo one (which would give it a stereo edge and put it back in the full BA); the
+    stereo keypoints' duplicates are fused as before. True: every duplicate, as before."""
+    from dataclasses import replace as dc_replace
+
+    rng = np.random.default_rng(11)
+    sil = set(np.flatnonzero(rng.random(len(lap["X"])) < 0.4).tolist())
+    kfs = {}
+    for k, kf in lap["keyframes"].items():
+        ur = kf.u_right.copy()
+        ur[np.isin(kf.landmark_ids % 10000, list(sil))] = -1.0   # bearing-only in every keyframe
+        kfs[k] = dc_replace(kf, u_right=ur)
+    positions = dict(lap["positions"])
+    for j in range(len(lap["X"])):
+        for lid in (j, 10000 + j):
+            if lid in positions:
+                positions[lid] = lap["X"][j]
+    fused = fuse_across_loop(kfs, lap["gt"], positions, list(range(FIRST_LATE, N_KF)), list(range(0, 5)), CALIB,
+                             dc_replace(LoopParams(), fuse_bearing_only=fuse_bearing_only), {})
+    truth = {10000 + j: j for j in lap["duplicated"]}
+    assert all(truth.get(d) == k for d, k in fused.items())
+    on_silhouettes = {k for k in fused.values() if k in sil}
+    stereo_truth = {d for d, k in truth.items() if k not in sil}
+    assert len([d for d in fused if d in stereo_truth]) >= 0.8 * len(stereo_truth)
+    if fuse_bearing_only:
+        assert len(on_silhouettes) >= 0.8 * len(set(truth.values()) & sil) > 10
+    else:
+        assert not on_silhouettes
+
+
+def test_full_ba_down_weights_bearing_only_landmarks_by_the_sigma_factor(lap):
+    """loop.full_ba_bearing_only_sigma_factor: the sliding silhouette landmarks stay in the full BA
+    but their edges count with a wider pixel sigma; they pull the lap off much less than at the
+    stereo points' sigma. Factor 1 is the plain BA."""
+    from dataclasses import replace as dc_replace
+
+    alias = {10000 + j: j for j in lap["duplicated"]}
+    kfs, sil = _with_sliding_silhouettes(lap, share=0.4, slide_m=0.3)
+    runs = {f: global_bundle_adjust(kfs, lap["drifted"], lap["positions"], CALIB,
+                                    dc_replace(LoopParams(), full_ba_bearing_only_sigma_factor=f), alias=dict(alias),
+                                    fixed=0) for f in (1.0, 20.0)}
+    err = {f: _max_errors(r.poses, lap["gt"])[0] for f, r in runs.items()}
+    print(f"silhouettes at factor 1: {err[1.0]:.3f} m, at factor 20: {err[20.0]:.4f} m")
+    assert {int(l) % 10000 for l in runs[20.0].landmark_ids.tolist()} & sil   # still in the BA
+    assert err[20.0] < 0.25 * err[1.0]

@@ -154,19 +154,23 @@ def global_bundle_adjust(keyframes: dict[int, PlaceKeyframe], poses: dict[int, n
         ur[m] = np.asarray(kf.u_right, float)[e_kp[m]]
         octv[m] = np.asarray(kf.octave, np.int64)[e_kp[m]]
     stereo = ur >= 0
-    level_scale = params.scale_factor ** octv.astype(float)
+    # edges of landmarks no keyframe measured in stereo (LoopParams.full_ba_bearing_only_sigma_factor)
+    _, lm_inv = np.unique(e_lm, return_inverse=True)
+    bearing_lm = np.bincount(lm_inv, weights=stereo.astype(float))[lm_inv] == 0 if n else np.zeros(0, bool)
+    edge_factor = np.where(bearing_lm, params.full_ba_bearing_only_sigma_factor, 1.0)
+    level_scale = params.scale_factor ** octv.astype(float) * edge_factor
     pixel_sigma = float(params.pixel_sigma)
     lm_ids = np.unique(e_lm)
     K = gtsam.Cal3_S2Stereo(calib.fx, calib.fy, 0.0, calib.cx, calib.cy, calib.baseline)
     Kmono = gtsam.Cal3_S2(calib.fx, calib.fy, 0.0, calib.cx, calib.cy)
     noise_cache: dict = {}
 
-    def noise(is_stereo: bool, o: int):
-        m = noise_cache.get((is_stereo, o, pixel_sigma))
+    def noise(is_stereo: bool, o: int, factor: float = 1.0):
+        m = noise_cache.get((is_stereo, o, pixel_sigma, factor))
         if m is None:
-            base = gtsam.noiseModel.Isotropic.Sigma(3 if is_stereo else 2, pixel_sigma * params.scale_factor**o)
+            base = gtsam.noiseModel.Isotropic.Sigma(3 if is_stereo else 2, pixel_sigma * params.scale_factor**o * factor)
             hub = gtsam.noiseModel.mEstimator.Huber.Create(np.sqrt(params.chi2_stereo if is_stereo else params.chi2_mono))
-            m = noise_cache[(is_stereo, o, pixel_sigma)] = gtsam.noiseModel.Robust.Create(hub, base)
+            m = noise_cache[(is_stereo, o, pixel_sigma, factor)] = gtsam.noiseModel.Robust.Create(hub, base)
         return m
 
     kf_ids = sorted(set(np.unique(e_kf).tolist()) | {fixed})
@@ -190,7 +194,8 @@ def global_bundle_adjust(keyframes: dict[int, PlaceKeyframe], poses: dict[int, n
                                                       noise(True, int(octv[j])), X(int(e_kf[j])), L(int(e_lm[j])), K))
             else:
                 graph.add(gtsam.GenericProjectionFactorCal3_S2(gtsam.Point2(uv[j, 0], uv[j, 1]),
-                                                               noise(False, int(octv[j])), X(int(e_kf[j])),
+                                                               noise(False, int(octv[j]), float(edge_factor[j])),
+                                                               X(int(e_kf[j])),
                                                                L(int(e_lm[j])), Kmono))
         t_build += time.perf_counter() - tb
         lm_params = gtsam.LevenbergMarquardtParams()
@@ -222,6 +227,8 @@ def global_bundle_adjust(keyframes: dict[int, PlaceKeyframe], poses: dict[int, n
             # then pull the second pass. Estimated on the edges that pass the assumed test.
             inl = active & (err2 / pixel_sigma**2 <= bound)
             n_par = 3 * len(np.unique(e_lm[inl])) + 6 * max(len(np.unique(e_kf[inl])) - 1, 0)
+            if params.full_ba_bearing_only_sigma_factor != 1.0:  # the noise of the edges at pixel_sigma
+                inl = inl & ~bearing_lm
             est = estimate_pixel_noise(res, octv, params.scale_factor, inl, n_par)
             if np.isfinite(est):
                 est = float(np.clip(est, params.full_ba_noise_min_px, params.full_ba_noise_max_px))
@@ -263,7 +270,14 @@ def fuse_across_loop(keyframes: dict[int, PlaceKeyframe], poses: dict[int, np.nd
     of the loop is projected into each keyframe of the query side (poses already corrected)
     and matched by descriptor in a small window; a keypoint there that observes another
     landmark observes a duplicate of the same tree, which becomes the older landmark.
-    Returns the new fusions {duplicate -> kept} (also added to ``alias``)."""
+    Returns the new fusions {duplicate -> kept} (also added to ``alias``). Without
+    ``params.fuse_bearing_only`` only keypoints measured in stereo take part on either side."""
+    def usable(kf: PlaceKeyframe, lids: np.ndarray) -> np.ndarray:
+        ok = lids >= 0
+        if not params.fuse_bearing_only:
+            ok &= np.asarray(kf.u_right, float) >= 0
+        return ok
+
     # candidate-side landmarks with a descriptor: that of the keypoint in the keyframe that saw it first
     lm_desc: dict[int, np.ndarray] = {}
     for k in sorted(candidate_group):
@@ -271,7 +285,7 @@ def fuse_across_loop(keyframes: dict[int, PlaceKeyframe], poses: dict[int, np.nd
         if kf is None:
             continue
         lids = resolve_array(kf.landmark_ids, alias)
-        for i in np.flatnonzero(lids >= 0).tolist():
+        for i in np.flatnonzero(usable(kf, lids)).tolist():
             lid = int(lids[i])
             if lid not in lm_desc and lid in positions:
                 lm_desc[lid] = kf.descriptors[i]
@@ -299,9 +313,10 @@ def fuse_across_loop(keyframes: dict[int, PlaceKeyframe], poses: dict[int, np.nd
                                     as_words(kf.descriptors), params.fuse_max_hamming, params.match_ratio,
                                     q_mask=in_view)
         lids = resolve_array(kf.landmark_ids, alias)
+        ok = usable(kf, lids)
         for a, r in zip(qi.tolist(), ri.tolist()):
             mine, theirs = int(lids[r]), int(c_ids[a])
-            if mine < 0 or mine == theirs or mine in c_set:
+            if not ok[r] or mine == theirs or mine in c_set:
                 continue
             keep, drop = min(mine, theirs), max(mine, theirs)  # the older landmark stays
             if resolve(drop, alias) != drop or drop in fused:

@@ -102,12 +102,19 @@ class LoopParams:
     # landmarks, tracking.contour_landmarks) stay out of the full BA and move with their reference
     # keyframe; their position is the stereo depth of a silhouette, no 3D point's (s8-drift)
     full_ba_bearing_only_landmarks: bool = True
+    # their edges' pixel sigma times this when they are in it (a silhouette's bearings agree over
+    # short baselines only): > 1 keeps their rotation information with less pull on the poses
+    full_ba_bearing_only_sigma_factor: float = 1.0
     # landmark fusion across the loop (ORB-SLAM SearchAndFuse): candidate-side landmarks
     # projected into the query side's keyframes after the correction
     fuse: bool = True
     fuse_neighbours: int = 10             # best covisible keyframes on each side of the loop
     fuse_radius: float = 4.0              # px search window around the projection
     fuse_max_hamming: int = 50
+    # False: only keypoints measured in stereo (u_right >= 0) take part in the fusion on either
+    # side; a contour (bearing-only) landmark fused with a stereo keypoint across the loop gets a
+    # stereo edge and is back in the full BA although its position is a silhouette's (s9-drift)
+    fuse_bearing_only: bool = True
     # ORB-SLAM CorrectLoop order: the query side is first moved rigidly by the verified loop
     # pose, the duplicates are fused, and the keyframe pairs the fusion links across the loop
     # (>= loop_connection_min_shared fused landmarks) become extra loop edges of the pose graph
@@ -164,6 +171,7 @@ class LoopParams:
              "and full_ba_passes must be >= 1")
         need(0 < self.full_ba_noise_min_px <= self.full_ba_noise_max_px, "full_ba_noise_min_px",
              "must be > 0 and <= full_ba_noise_max_px")
+        need(self.full_ba_bearing_only_sigma_factor > 0, "full_ba_bearing_only_sigma_factor", "must be > 0")
         need(self.full_ba_min_observations >= 1, "full_ba_min_observations", "must be >= 1")
         need(self.fuse_neighbours >= 0, "fuse_neighbours", "must be >= 0")
         need(self.fuse_radius > 0, "fuse_radius", "must be > 0")
