@@ -60,6 +60,16 @@ def _watch_until(endpoint, n_posed):
     raise AssertionError(f"the run never reached {n_posed} posed frames")
 
 
+def _wait_for_size(path, n_bytes, timeout_s):
+    """Wait until ``path`` holds more than ``n_bytes`` (a writer's first flush reached the disk)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if path.exists() and path.stat().st_size > n_bytes:
+            return
+        time.sleep(0.1)
+    raise AssertionError(f"{path} never grew past {n_bytes} bytes in {timeout_s} s")
+
+
 def _wait_gone(pids, timeout_s=END_WITHIN_S):
     deadline = time.monotonic() + timeout_s
     alive = list(pids)
@@ -124,6 +134,9 @@ def test_sigkill_of_the_recorder_leaves_an_mcap_that_opens(tmp_path):
     proc, endpoint = _start(tmp_path, "--dataset", "euroc", "--record")
     try:
         pids = _watch_until(endpoint, 10)
+        # the recorder flushes a chunk at most once a second and may lag tracking on a loaded
+        # machine: kill it once its first chunk is on disk (before that the file is the bare header)
+        _wait_for_size(tmp_path / "run" / "run.mcap", 64, timeout_s=120)  # header alone: 45 B
         os.kill(pids["recorder"], signal.SIGKILL)
         _, stderr = proc.communicate(timeout=END_WITHIN_S)
     finally:
