@@ -1,6 +1,7 @@
 """Issue 9's grid criteria as the degradation benchmark scores them (benchmarks/bench_degrade_grid.py)."""
 import importlib.util
 from pathlib import Path
+import pytest
 
 _spec = importlib.util.spec_from_file_location(
     "bench_degrade_grid", Path(__file__).resolve().parents[1] / "benchmarks" / "bench_degrade_grid.py")
@@ -79,3 +80,19 @@ def test_generated_cells_take_rendered_haze_by_default_and_are_cached_apart(tmp_
     (rendered / "DEGRADED.yaml").write_text(yaml.safe_dump(record))
     with pytest.raises(SystemExit, match="stereo"):
         grid.degraded_cell("euroc", "day-loop", seq, hazy, 1, tmp_path, cache, "rendered")
+
+
+def test_median_run_ranks_by_tracked_then_ate_and_keeps_every_run():
+    runs = [{"tracked_pct": 100.0, "ate_rmse_m": 0.046}, {"tracked_pct": 100.0, "ate_rmse_m": 0.100},
+            {"tracked_pct": 100.0, "ate_rmse_m": 0.038}, {"tracked_pct": 100.0, "ate_rmse_m": 0.095}]
+    # four runs: the worse of the two middle ones (0.046, 0.095) -> the verdict never rests on luck
+    mid = grid.median_run(runs)
+    assert mid["ate_rmse_m"] == 0.095
+    assert [r["ate_rmse_m"] for r in mid["runs"]] == [0.046, 0.100, 0.038, 0.095]
+    # a run that lost its map (no ATE, fewer frames) ranks below every run that tracked
+    lost = [{"tracked_pct": 0.0, "ate_rmse_m": None}, {"tracked_pct": 100.0, "ate_rmse_m": 0.0466},
+            {"tracked_pct": 100.0, "ate_rmse_m": 0.0348}]
+    assert grid.median_run(lost)["ate_rmse_m"] == 0.0466
+    assert grid.median_run([{"tracked_pct": 41.0, "ate_rmse_m": None}])["tracked_pct"] == 41.0
+    with pytest.raises(ValueError):
+        grid.median_run([])
