@@ -44,8 +44,11 @@ class RuntimeParams:
     map_snapshot_period_s: float = 0.5
     # niceness of the source and enhancement actors (cheap feeders that read ahead in lockstep): on
     # two cores a feeder waking up should not take the core from tracking or local mapping; local
-    # mapping stays at 0 (docs/notes/s6-speed.md), loop closing has its own (loop.niceness)
-    feeder_niceness: int = 5
+    # mapping stays at 0 (docs/notes/s6-speed.md), loop closing has its own (loop.niceness).
+    # 15 rather than 5 (s9, benchmarks/bench_pipelining.py, 4 interleaved reps, quiet): tracking p50
+    # EuRoC 37.4 -> 32.1 ms, KITTI 80.1 -> 76.4 ms, same trajectories; the feeders read two frames
+    # ahead, so a later wake-up costs nothing in lockstep
+    feeder_niceness: int = 15
     seed: int = 0
     sensor: str = "stereo"           # stereo | mono (the left image only; canopy.mono)
 
