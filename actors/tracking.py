@@ -61,7 +61,12 @@ class TrackingActor(Actor):
         # the threads' scheduler statistics from the first frame on (start-up excluded)
         self.stage_cpu: dict[str, list[float]] = {}
         self.sched_start: dict[int, tuple[int, int]] | None = None
+        self.sched_start_wall = 0.0
         self.n_tracked = 0
+        # where the tracking thread's wall time goes beyond its CPU and run-queue wait, per frame:
+        # waiting for a lockstep map update before the frame, waiting for the worker's stereo matches
+        # (the tracker's "stereo" stage, wall), and the rest of the blocked time (GIL, OpenCV's pool)
+        self.waits: dict[str, list[float]] = {"map_update": [], "stereo": []}
 
     def _attach_place_memory(self, c: dict) -> None:
         """Relocalisation by database query (canopy.loop.relocalise): in a map loaded with
@@ -127,6 +132,7 @@ class TrackingActor(Actor):
         # (rule: canopy.enhance.fast.tracking_fast_arguments; denoised dark frames fill the feature budget)
         if self.sched_start is None:
             self.sched_start = thread_schedstat()
+            self.sched_start_wall = time.perf_counter()
         if self.adaptive_fast:
             res = self.tracker.track(frame, **tracking_fast_arguments(
                 frame.left, (handle.info or {}).get("method", "none"), self.enhancement, self.n_features))
@@ -137,6 +143,7 @@ class TrackingActor(Actor):
         for key, ms in res.timings.items():
             if key.endswith("_cpu"):
                 self.stage_cpu.setdefault(key[:-4], []).append(float(ms))
+        self.waits["stereo"].append(float(res.timings.get("stereo", 0.0)))
         if res.lost_reason:
             self.counts[f"lost_reason_{res.lost_reason}"] = self.counts.get(f"lost_reason_{res.lost_reason}", 0) + 1
         # a monocular initialisation hands over two keyframes (reference and current)
@@ -176,6 +183,7 @@ class TrackingActor(Actor):
     def _apply_due_updates(self, frame_index: int, ctx: ActorContext) -> None:
         """Lockstep: apply the map updates due before ``frame_index``, waiting for any that has
         not arrived; frames and the end of stream arriving meanwhile queue in the backlog."""
+        t0 = time.perf_counter()
         deadline = time.monotonic() + self.wait_s
         while (kf_index := self.schedule.missing(frame_index)) is not None:
             if time.monotonic() >= deadline:
@@ -183,6 +191,8 @@ class TrackingActor(Actor):
             msg = ctx.recv_inbox(100)
             if msg is not None:
                 self.on_message(msg, ctx)
+        if self.sched_start is not None:  # from the first frame on, as the thread statistics
+            self.waits["map_update"].append((time.perf_counter() - t0) * 1e3)
         for update in self.schedule.take_due(frame_index):
             self._apply_update(update)
 
@@ -197,3 +207,12 @@ class TrackingActor(Actor):
             if worker is not None:
                 names[worker] = "tracking_worker"
             ctx.extra["threads"] = thread_report(self.sched_start, thread_schedstat(), names, self.n_tracked)
+            # the tracking thread's wall time since the first frame minus its CPU and run-queue wait:
+            # the time it slept (waits above, the GIL, OpenCV's thread pool, the next frame's arrival)
+            me = ctx.extra["threads"].get("tracking")
+            if me is not None and self.n_tracked:
+                wall_ms = (time.perf_counter() - self.sched_start_wall) * 1e3 / self.n_tracked
+                me["blocked_ms_per_frame"] = round(wall_ms - me["cpu_ms_per_frame"] - me["runqueue_wait_ms_per_frame"], 3)
+            ctx.extra["wait_ms"] = {name: {"p50": round(float(np.percentile(v, 50)), 3),
+                                           "mean": round(float(np.mean(v)), 3)}
+                                    for name, v in self.waits.items() if v}
