@@ -156,25 +156,29 @@ def quadtree_select(x: np.ndarray, y: np.ndarray, score: np.ndarray, x0: float, 
     rw = width / n_root
     rx, ry = (x - x0) / rw, (y - y0) / height             # root-node units
     # rank of each point's score (0 = best): one sort serves every depth's best-per-node
+    by_rank = np.argsort(_descending_key(score), kind="stable")   # point of each rank
     rank = np.empty(n, np.int64)
-    rank[np.argsort(_descending_key(score), kind="stable")] = np.arange(n)
+    rank[by_rank] = np.arange(n)
+    # node keys by truncation when no point lies left of or above the region (the extractor's
+    # never do): equal to the floor for non-negative values, one pass less per depth
+    floor = not (len(rx) and rx.min() >= 0 and ry.min() >= 0)
     # depths below log4(quota / n_root) have fewer nodes than the quota: start there
     depth = max(0, int(np.floor(np.log(quota / n_root) / np.log(4.0))))
-    prev_key = None if depth == 0 else _node_keys(rx, ry, n_root, depth - 1)
+    prev_key = None if depth == 0 else _node_keys(rx, ry, n_root, depth - 1, floor)
     while True:
-        key = _node_keys(rx, ry, n_root, depth)
+        key = _node_keys(rx, ry, n_root, depth, floor)
         occupied = np.zeros(int(key.max()) + 1, bool)
         occupied[key] = True
         if int(occupied.sum()) >= quota or rw / 2 ** depth < 1.0:
             break
         prev_key = key
         depth += 1
-    winners = _best_per_key(key, rank)
+    winners = _best_per_key(key, rank, by_rank)
     if len(winners) <= quota:
         return winners
     # every parent node keeps its best (they are fewer than the quota), the rest by score: ORB-SLAM
     # splits the most populated nodes last in its final round, which ends at the quota
-    parent_best = _best_per_key(prev_key, rank) if prev_key is not None else np.zeros(0, np.int64)
+    parent_best = _best_per_key(prev_key, rank, by_rank) if prev_key is not None else np.zeros(0, np.int64)
     is_parent_best = np.zeros(n, bool)   # a parent's best is its child's best too: a subset of winners
     is_parent_best[parent_best] = True
     rest = winners[~is_parent_best[winners]]
@@ -194,18 +198,23 @@ def _descending_key(score: np.ndarray) -> np.ndarray:
     return neg
 
 
-def _node_keys(rx: np.ndarray, ry: np.ndarray, n_root: int, depth: int) -> np.ndarray:
+def _node_keys(rx: np.ndarray, ry: np.ndarray, n_root: int, depth: int, floor: bool = True) -> np.ndarray:
+    """Node key of every point at ``depth``; ``floor=False`` truncates (same for rx, ry >= 0)."""
     k = 2 ** depth
-    return np.floor(ry * k).astype(np.int64) * (n_root * k + 1) + np.floor(rx * k).astype(np.int64)
+    if floor:
+        return np.floor(ry * k).astype(np.int64) * (n_root * k + 1) + np.floor(rx * k).astype(np.int64)
+    return (ry * k).astype(np.int64) * (n_root * k + 1) + (rx * k).astype(np.int64)
 
 
-def _best_per_key(key: np.ndarray, rank: np.ndarray) -> np.ndarray:
+def _best_per_key(key: np.ndarray, rank: np.ndarray, by_rank: np.ndarray | None = None) -> np.ndarray:
     """Index of the best-ranked point of every key (``rank``: a permutation, 0 = best), sorted.
-    The smallest rank per key by ``np.minimum.at`` over a table of the keys: no sort of all points."""
+    The smallest rank per key by ``np.minimum.at`` over a table of the keys: no sort of all points.
+    ``by_rank``: the inverse permutation (the point of each rank) if the caller has it."""
     best = np.full(int(key.max()) + 1, len(rank), np.int64)
     np.minimum.at(best, key, rank)
-    by_rank = np.empty_like(rank)
-    by_rank[rank] = np.arange(len(rank))
+    if by_rank is None:
+        by_rank = np.empty_like(rank)
+        by_rank[rank] = np.arange(len(rank))
     return np.sort(by_rank[best[best < len(rank)]])
 
 
