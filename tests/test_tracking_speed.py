@@ -13,7 +13,7 @@ from canopy.backend import LocalMapper
 from canopy.config import load_run_config
 from canopy.frontend import Tracker
 from canopy.frontend.features import OrbExtractor
-from canopy.frontend.matching import (as_words, band_pairs, best_two, grid_pairs_grouped, hamming_pairs,
+from canopy.frontend.matching import (as_words, band_pairs, best_two, floor_divide, grid_pairs_grouped, hamming_pairs,
                                       match_in_window)
 from canopy.frontend.stereo import match_stereo, stereo_candidates, subpixel_refine
 from canopy.sources import open_source
@@ -224,3 +224,26 @@ def test_left_noise_sigma_is_measured_once_per_frame(kitti, monkeypatch, paralle
     res = tracker.track(frames[0])
     assert res.status != "lost"
     assert sorted(measured) == sorted([id(frames[0].left), id(frames[0].right)])
+
+
+def test_floor_divide_equals_numpys_floor_division_where_rounding_could_differ():
+    """floor(a / b) with numpy's ``//`` where the quotient is integral: the same values as ``//``
+    on multiples of the divisor, their float neighbours (where a / b rounds up to the next
+    integer: 0.30000000000000004 // 0.1 is 2, floor(0.30000000000000004 / 0.1) would be 3),
+    pixel coordinates over cell sizes, negative values, zeros and non-finite values."""
+    rng = np.random.default_rng(3)
+    b = np.concatenate([[0.1, 0.3, 1.0, 4.0, 4.8, 5.76, 6.912, 14.3327232], rng.uniform(1.0, 60.0, 40)])
+    k = np.arange(-50, 400, dtype=float)
+    mult = k[:, None] * b[None, :]
+    a = np.stack([mult, np.nextafter(mult, -np.inf), np.nextafter(mult, np.inf)], axis=0)
+    bb = np.broadcast_to(b, a.shape)
+    with np.errstate(all="ignore"):
+        assert np.array_equal(floor_divide(a, bb), a // bb)
+        assert (floor_divide(a, bb) != np.floor(a / bb)).any()  # the case the fallback is there for
+        uv = rng.uniform(0, 1241, (5000, 2)).astype(np.float32) - np.float32(0.5)
+        assert np.array_equal(floor_divide(uv[:, None, :], b[None, :, None]), uv[:, None, :] // b[None, :, None])
+        odd = np.array([0.0, -0.0, 1e-300, -1e-300, np.inf, -np.inf, np.nan, 7.0])
+        for d in (0.0, 2.5, -2.5, np.inf):
+            assert np.array_equal(floor_divide(odd, d), odd // d, equal_nan=True)
+    ints = np.arange(-7, 8)
+    assert np.array_equal(floor_divide(ints, 3), ints // 3) and floor_divide(ints, 3).dtype == ints.dtype

@@ -21,6 +21,25 @@ else:  # numpy < 2.0: 256-entry byte lookup table
 DESCRIPTOR_BYTES = 32
 
 
+def floor_divide(a, b) -> np.ndarray:
+    """``a // b`` for float arrays, the same values ~20x faster: numpy's float floor division
+    goes through ``fmod`` (~25 ns per element), ``floor(a / b)`` does not. The correctly rounded
+    quotient a / b is never below the exact quotient's floor k (k is representable), and it can
+    reach k + 1 only by rounding up to exactly k + 1: so where a / b is not an integer, its floor
+    is k, and where it is one (rare for pixel coordinates and cell sizes), numpy's ``//`` decides.
+    Integer inputs go to ``//`` as they are."""
+    a, b = np.asarray(a), np.asarray(b)
+    if a.dtype.kind != "f" and b.dtype.kind != "f":
+        return a // b
+    q = np.true_divide(a, b)
+    f = np.floor(q)
+    exact = f == q           # integral (or infinite) quotients: possibly rounded up, so numpy's own
+    if exact.any():
+        a_b, b_b = np.broadcast_arrays(a, b)
+        f[exact] = a_b[exact] // b_b[exact]
+    return f
+
+
 def as_words(desc: np.ndarray) -> np.ndarray:
     """(N,32) uint8 ORB descriptors viewed as (N,4) uint64 words."""
     d = np.ascontiguousarray(desc, dtype=np.uint8).reshape(-1, DESCRIPTOR_BYTES)
@@ -151,11 +170,11 @@ def grid_pairs(q_uv: np.ndarray, r_uv: np.ndarray, cell: float) -> tuple[np.ndar
     cell = max(cell, 1.0)
     lo_uv = np.minimum(q_uv.min(axis=0), r_uv.min(axis=0))
     n_cols = int((max(q_uv[:, 0].max(), r_uv[:, 0].max()) - lo_uv[0]) // cell) + 3
-    rc = ((r_uv - lo_uv) // cell).astype(np.int64)
+    rc = floor_divide(r_uv - lo_uv, cell).astype(np.int64)
     rkey = rc[:, 1] * n_cols + rc[:, 0]
     order = np.argsort(rkey, kind="stable")
     rkey_sorted = rkey[order]
-    qc = ((q_uv - lo_uv) // cell).astype(np.int64)
+    qc = floor_divide(q_uv - lo_uv, cell).astype(np.int64)
     col_lo = np.maximum(qc[:, 0] - 1, 0)
     col_hi = qc[:, 0] + 1
     qis, rjs = [], []
@@ -189,12 +208,12 @@ def grid_pairs_grouped(q_uv: np.ndarray, r_uv: np.ndarray, r_group: np.ndarray,
     n_rows = (span[1] // cells).astype(np.int64) + 3
     sizes = n_cols * n_rows
     offset = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-    rc = ((r_uv - lo_uv) // cells[r_group][:, None]).astype(np.int64)
+    rc = floor_divide(r_uv - lo_uv, cells[r_group][:, None]).astype(np.int64)
     rkey = offset[r_group] + rc[:, 1] * n_cols[r_group] + rc[:, 0]
     order = np.argsort(rkey, kind="stable")
     start = np.zeros(int(sizes.sum()) + 1, np.int64)   # start[k]: references with a key < k
     np.cumsum(np.bincount(rkey, minlength=len(start) - 1), out=start[1:])
-    qc = ((q_uv - lo_uv)[:, None, :] // cells[None, :, None]).astype(np.int64)    # (Q,G,2)
+    qc = floor_divide((q_uv - lo_uv)[:, None, :], cells[None, :, None]).astype(np.int64)    # (Q,G,2)
     row = qc[:, :, None, 1] + np.arange(-1, 2)                                       # (Q,G,3)
     # a query's cells lie inside its group's grid (one spare row/column each side); row -1 is empty
     base = offset[None, :, None] + np.maximum(row, 0) * n_cols[None, :, None]
@@ -204,9 +223,10 @@ def grid_pairs_grouped(q_uv: np.ndarray, r_uv: np.ndarray, r_group: np.ndarray,
     total = int(counts.sum())
     if total == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    needle = np.repeat(np.arange(len(counts)), counts)
+    # the query of every pair: counts are laid out query by query, 3 x n_groups ranges each
+    query = np.repeat(np.repeat(np.arange(len(q_uv)), 3 * n_groups), counts)
     rpos = np.repeat(lo.reshape(-1) - np.cumsum(counts) + counts, counts) + np.arange(total)
-    return needle // (3 * n_groups), order[rpos]
+    return query, order[rpos]
 
 
 def match_in_window(q_uv: np.ndarray, q_words: np.ndarray, q_radius: np.ndarray,
