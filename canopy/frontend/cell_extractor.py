@@ -330,7 +330,9 @@ class CellExtractor:
         pts, score = _fast_points(self._fast, img[y0 - FAST_BORDER:y1 + FAST_BORDER, x0 - FAST_BORDER:x1 + FAST_BORDER],
                                   x0 - FAST_BORDER, y0 - FAST_BORDER)
         keep = (pts[:, 0] >= x0) & (pts[:, 0] < x1) & (pts[:, 1] >= y0) & (pts[:, 1] < y1)
-        pts_all, scores = [pts[keep]], [score[keep]]
+        if not keep.all():  # OpenCV's FAST leaves the view's 3 px border out: all are inside, as a rule
+            pts, score = pts[keep], score[keep]
+        pts_all, scores = [pts], [score]
         if low < high:
             p = pts_all[0]
             cell = np.minimum((p[:, 1] - y0) // ch, nrow - 1) * ncol + np.minimum((p[:, 0] - x0) // cw, ncol - 1)
