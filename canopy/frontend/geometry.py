@@ -12,31 +12,46 @@ import numpy as np
 from shared.types import StereoCalibration
 
 _LOG_2PI_E = float(np.log(2.0 * np.pi * np.e))
+_EYE3 = np.eye(3)
+_EYE3.flags.writeable = False  # only ever added to: a new array each time
 
 
 def skew(w: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
 
 
-def so3_exp(w: np.ndarray) -> np.ndarray:
-    theta = float(np.linalg.norm(w))
-    W = skew(w)
+def _norm(w: np.ndarray) -> float:
+    """``np.linalg.norm`` of a float vector (its own computation, sqrt(w . w)) without its
+    argument handling: the pose refinement calls it ~30 times per frame."""
+    return float(np.sqrt(w.dot(w)))
+
+
+def _so3_exp(theta: float, W: np.ndarray, sin_t, one_minus_cos: float) -> np.ndarray:
     if theta < 1e-10:
-        return np.eye(3) + W
-    return np.eye(3) + np.sin(theta) / theta * W + (1.0 - np.cos(theta)) / theta**2 * W @ W
+        return _EYE3 + W
+    return _EYE3 + sin_t / theta * W + one_minus_cos / theta**2 * W @ W
+
+
+def so3_exp(w: np.ndarray) -> np.ndarray:
+    w = np.asarray(w, float)
+    theta = _norm(w)
+    return _so3_exp(theta, skew(w), np.sin(theta), 1.0 - np.cos(theta))
 
 
 def se3_exp(xi: np.ndarray) -> np.ndarray:
-    """exp of xi = (omega, v) as a 4x4 matrix."""
+    """exp of xi = (omega, v) as a 4x4 matrix. (theta, [w]x, sin and cos computed once for the
+    rotation and V: the same values as computing them for each.)"""
     w, v = np.asarray(xi[:3], float), np.asarray(xi[3:], float)
-    theta = float(np.linalg.norm(w))
+    theta = _norm(w)
     W = skew(w)
+    sin_t = cos_t = None
     if theta < 1e-10:
-        V = np.eye(3) + 0.5 * W
+        V = _EYE3 + 0.5 * W
     else:
-        V = np.eye(3) + (1 - np.cos(theta)) / theta**2 * W + (theta - np.sin(theta)) / theta**3 * W @ W
+        sin_t, cos_t = np.sin(theta), np.cos(theta)
+        V = _EYE3 + (1 - cos_t) / theta**2 * W + (theta - sin_t) / theta**3 * W @ W
     T = np.eye(4)
-    T[:3, :3] = so3_exp(w)
+    T[:3, :3] = _so3_exp(theta, W, sin_t, None if cos_t is None else 1.0 - cos_t)
     T[:3, 3] = V @ v
     return T
 
