@@ -14,6 +14,7 @@ from __future__ import annotations
 import threading
 import time
 
+import cv2
 import numpy as np
 
 from actors.backlog import FrameBacklog, max_frame_age
@@ -38,6 +39,11 @@ class TrackingActor(Actor):
     def setup(self, ctx: ActorContext) -> None:
         c = self.config
         self.ring = FrameRing.attach(c["ring"])
+        # OpenCV calls run on their caller (tracking, its worker): no pool thread to wait for
+        # (TrackingParams.opencv_threads)
+        n_cv = int(getattr(c["params"], "opencv_threads", 0))
+        if n_cv > 0:
+            cv2.setNumThreads(n_cv)
         if c.get("sensor", "stereo") == "mono":
             from canopy.mono import MonoTracker
             self.tracker = MonoTracker(c["calib"], c["params"], c.get("mono"))

@@ -27,9 +27,11 @@ import sys
 import time
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_CV_THREADS = cv2.getNumThreads()
 sys.path.insert(0, str(ROOT))
 
 from canopy.backend import LocalMapper  # noqa: E402
@@ -48,6 +50,8 @@ MAP_STAGES = ("insert", "window", "ba", "cull", "update", "total")
 def run_once(dataset: str, frames, calib, sets) -> dict:
     cfg = with_settings(load_run_config(dataset), sets)
     tp, mp, rt = cfg.tracking, cfg.mapping, cfg.runtime
+    # as the tracking actor sets its process (here local mapping shares the setting)
+    cv2.setNumThreads(tp.opencv_threads if tp.opencv_threads > 0 else DEFAULT_CV_THREADS)
     tracker, mapper = Tracker(calib, tp), LocalMapper(calib, mp)
     schedule = MapUpdateSchedule(effective_map_update_lag(rt.map_update_lag_frames, tp))
     track_cpu, map_cpu, step_wall, stage, map_stage = [], [], [], [], []

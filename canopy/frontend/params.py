@@ -33,6 +33,15 @@ class TrackingParams:
     # left features; identical results (canopy.frontend.tracker_worker). Not with lines (their jobs
     # share the worker).
     parallel_stereo: bool = True
+    # OpenCV's own thread pool in the tracking process (cv2.setNumThreads, set by the tracking
+    # actor; 0 leaves OpenCV's default, one thread per core). The process already runs two
+    # threads (this one and the worker) on a 2-core machine shared with local mapping: a parallel
+    # OpenCV call (resize, the blur in ORB.compute, the stereo pyramids) hands stripes to a pool
+    # thread and then waits for it, and that thread waits for a core. 1: each call runs on its
+    # caller. KITTI in process, load ~15-19, 4 runs each: the tracking thread's blocked time
+    # (wall - CPU - run-queue wait) per frame 6.1-7.6 -> 2.0-3.9 ms, its wait for the worker's
+    # stereo 6.6-9.7 -> 3.8-5.8 ms; identical results (docs/notes/s10-speedfront.md).
+    opencv_threads: int = 1
     grid_cols: int = 16
     grid_rows: int = 8
     oversample: float = 1.6
@@ -225,6 +234,7 @@ class TrackingParams:
                 raise ConfigError("TrackingParams", f"{name} {what} (got {getattr(self, name)!r})")
 
         need(self.n_features > 0, "n_features", "must be > 0")
+        need(self.opencv_threads >= 0, "opencv_threads", "must be >= 0 (0: OpenCV's default)")
         need(self.scale_factor > 1.0, "scale_factor", "must be > 1")
         need(1 <= self.n_levels <= 16, "n_levels", "must be in [1, 16]")
         need(0 < self.fast_threshold < 255, "fast_threshold", "must be in (0, 255)")
