@@ -52,8 +52,13 @@ def main() -> int:
     base = load_module(a.base / rel, "base_cell_extractor")
     this = load_module(ROOT / rel, "this_cell_extractor")
     tp = load_run_config(a.dataset).tracking
-    ex_base = base.CellExtractor(tp)
     ex_this = this.CellExtractor(tp, responses=False) if a.no_responses else this.CellExtractor(tp)
+    ex_base = base.CellExtractor(tp)
+    if a.no_responses:  # the base as its tracker builds it too, if it has the option (s9 on)
+        try:
+            ex_base = base.CellExtractor(tp, responses=False)
+        except TypeError:
+            print("ab_cell_extractor: the base has no responses option: it computes Harris responses (~3 ms)")
     fields = tuple(f for f in FIELDS if not (a.no_responses and f == "response"))
     src = open_source(a.dataset, None)
     images = [src.frame(i).left for i in range(len(src))] + [src.frame(i).right for i in range(len(src))]
