@@ -34,14 +34,13 @@ class TrackingParams:
     # share the worker).
     parallel_stereo: bool = True
     # OpenCV's own thread pool in the tracking process (cv2.setNumThreads, set by the tracking
-    # actor; 0 leaves OpenCV's default, one thread per core). The process already runs two
-    # threads (this one and the worker) on a 2-core machine shared with local mapping: a parallel
-    # OpenCV call (resize, the blur in ORB.compute, the stereo pyramids) hands stripes to a pool
-    # thread and then waits for it, and that thread waits for a core. 1: each call runs on its
-    # caller. KITTI in process, load ~15-19, 4 runs each: the tracking thread's blocked time
-    # (wall - CPU - run-queue wait) per frame 6.1-7.6 -> 2.0-3.9 ms, its wait for the worker's
-    # stereo 6.6-9.7 -> 3.8-5.8 ms; identical results (docs/notes/s10-speedfront.md).
-    opencv_threads: int = 1
+    # actor when > 0; 0 leaves OpenCV's default, one thread per core). 1 (each OpenCV call on its
+    # caller) looked better in process at load 15-19 (the tracking thread's blocked time per KITTI
+    # frame 4.5 -> 1.4 ms p50, its stereo wait 5.7 -> 3.9 ms) but not through the actors at load ~7
+    # (3 alternating runs each: blocked 11.9 -> 16.5 ms, stereo wait mean 8.7 -> 10.7 ms, 12.7 vs
+    # 12.5 frames/s): the pool helps the worker when a core is free. Same results either way
+    # (docs/notes/s10-speedfront.md); a quiet-machine bench_peers run decides.
+    opencv_threads: int = 0
     grid_cols: int = 16
     grid_rows: int = 8
     oversample: float = 1.6
