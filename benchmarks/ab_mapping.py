@@ -17,6 +17,7 @@ lockstep run of this checkout (``profile_tracking.run_once``), then
 from __future__ import annotations
 
 import argparse
+import hashlib
 import importlib.util
 import os
 import pickle
@@ -81,7 +82,11 @@ def replay(recording: Path, reps: int) -> None:
             total += time.thread_time() - t0
         per_kf.append(total / max(len(rec["keyframes"]), 1) * 1e3)
         pts = mapper.map_points()
-        checksum = f"{len(pts)} points, sum {pts.sum():.9f}"
+        poses = np.array([mapper.keyframes[k].T_world_cam for k in sorted(mapper.keyframes)], float)
+        ids = np.array(sorted(mapper.landmarks), np.int64)
+        # bit-level: every point, keyframe pose and landmark id (a float sum can hide a changed last bit)
+        digest = hashlib.sha256(pts.tobytes() + poses.tobytes() + ids.tobytes()).hexdigest()[:16]
+        checksum = f"{len(pts)} points, sum {pts.sum():.9f}, sha256 {digest}"
     import canopy
     print("REPLAY", " ".join(f"{x:.2f}" for x in per_kf), "|", checksum, "|", Path(canopy.__file__).parents[1])
 
@@ -119,6 +124,7 @@ def main() -> int:
     ap.add_argument("--base", type=Path, help="the other checkout's root")
     ap.add_argument("--dataset", default="kitti")
     ap.add_argument("--reps", type=int, default=3)
+    ap.add_argument("--recording", type=Path, help="reuse (or, if missing, write) this recording instead of a temporary one")
     ap.add_argument("--replay", type=Path, help=argparse.SUPPRESS)   # internal: one side of the mapper A/B
     a = ap.parse_args()
     if a.replay:
@@ -127,8 +133,9 @@ def main() -> int:
     if a.base is None:
         ap.error("--base is required")
     with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "recording.pkl"
-        record(a.dataset, path)
+        path = a.recording or Path(tmp) / "recording.pkl"
+        if not path.is_file():
+            record(a.dataset, path)
         with open(path, "rb") as f:
             rec = pickle.load(f)
         print(f"{a.dataset}: {len(rec['keyframes'])} keyframes, {len(rec['ba_calls'])} BA calls recorded")

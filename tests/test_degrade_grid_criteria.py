@@ -30,6 +30,19 @@ def test_issue9_checks_apply_both_criteria_per_cell():
     assert checks["darker"]["pass"] is None and not checks["darker"]["at_least_orb_raw"]  # 8 % < 24 %
 
 
+
+def test_equal_frame_counts_tie_whatever_the_rounding():
+    """12 of 51 frames as 100 * (12 / 51) and as 100 * 12 / 51 differ in the last bit; a tie in
+    frames must not count as fewer tracked frames."""
+    ours, peer = 100.0 * (12 / 51), 100.0 * 12 / 51
+    assert ours < peer  # the rounding this guards against
+    rows = [_row("clean", "auto", 100.0, 0.05),
+            _row("tie", "auto", ours, 15.2), _row("tie", "orbslam3-raw", peer, 19.5),
+            _row("one-less", "auto", 100.0 * 11 / 51, 15.2), _row("one-less", "orbslam3-raw", peer, 19.5)]
+    checks = {c["cell"]: c for c in grid.issue9_checks(rows)}
+    assert checks["tie"]["at_least_orb_raw"]
+    assert not checks["one-less"]["at_least_orb_raw"]
+
 def test_merge_keeps_the_latest_row_of_a_cell(tmp_path):
     import json
     old = {"datasets": ["kitti"], "gains": [1.0], "betas": [0.06], "methods": ["auto"], "noise_levels": ["high"],

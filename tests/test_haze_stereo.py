@@ -73,7 +73,9 @@ def _off_disparity(params, calib, left, right, ref_disp):
 
 def test_zero_mean_sad_puts_fewer_stereo_matches_off_on_hazy_noisy_and_clean_pairs():
     src = open_source("kitti", KITTI)
-    base = replace(load_run_config("kitti").tracking, parallel_extraction=False)
+    # the SAD normalisation alone: without the smoothed refinement of noisy frames (on in kitti.yaml since
+    # s10, it brings hazy_centre 0.31 -> 0.22 by itself; docs/notes/s10-noise.md)
+    base = replace(load_run_config("kitti").tracking, parallel_extraction=False, subpixel_denoise_sigma=0.0)
     totals = {k: np.zeros(3, int) for k in ("clean_centre", "clean_mean", "hazy_centre", "hazy_mean")}
     for i in FRAMES:
         f, ref, hl, hr = hazy_noisy_pair(src, i)

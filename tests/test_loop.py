@@ -224,3 +224,31 @@ def test_generated_revisit_is_the_best_database_match(day_loop_views):
     res = db.query(q.bow, stats=q.stats)
     assert res[0].keyframe == 5
     assert res[0].score > 1.5 * max(c.score for c in res[1:])
+
+
+@pytest.mark.parametrize("spacing", [1, 10**7])   # dense keyframe indices (bins) and sparse ones (sort)
+def test_database_scores_equal_the_pairwise_l1_score(spacing):
+    from canopy.place import Vocabulary
+
+    rng = np.random.default_rng(11)
+
+    def bow():
+        words = rng.choice(400, size=int(rng.integers(5, 60)), replace=False)
+        v = rng.random(len(words))
+        return dict(zip(words.tolist(), (v / v.sum()).tolist()))
+
+    db, stored = KeyframeDatabase(), {}
+    for i in range(200):   # > MIN_MERGE postings: merged arrays and a tail both hold keyframes
+        k = 3 + i * spacing
+        stored[k] = bow()
+        db.add(k, stored[k])
+    for k in list(stored)[5:15] + list(stored)[-3:]:
+        db.remove(k)
+        del stored[k]
+    for _ in range(5):
+        q = bow()
+        got = db.scores(q)
+        want = {k: Vocabulary.score(q, b) for k, b in stored.items() if set(q) & set(b)}
+        assert sorted(got) == sorted(want)
+        for k, (s, common) in got.items():
+            assert s == pytest.approx(want[k], abs=1e-12) and common == len(set(q) & set(stored[k]))

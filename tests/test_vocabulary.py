@@ -104,6 +104,38 @@ def test_words_are_the_leaves_of_the_greedy_descent(small_trained, kimera_orb):
     assert abs(sum(bow.values()) - 1.0) < 1e-9
 
 
+def test_descent_takes_the_first_child_on_ties_and_handles_uneven_nodes():
+    """Hand-built tree (k=3): the root has 3 children, child 1 only 2 (a spare slot), child 2
+    is a leaf at depth 1; probes equidistant from several children go to the first of them."""
+    z = np.zeros(32, np.uint8)
+    def bits(*idx):
+        d = z.copy()
+        for i in idx:
+            d[i // 8] |= 1 << (i % 8)
+        return d
+    #        root      1 (inner)   2 (inner)   3 (leaf)   4,5 under 1    6,7,8 under 2
+    desc = [z,         bits(0),    bits(1),    bits(2),   bits(0, 3),    bits(0, 4),
+            bits(1, 5), bits(1, 6), bits(1, 7)]
+    parent = [-1, 0, 0, 0, 1, 1, 2, 2, 2]
+    is_leaf = [False, False, False, True, True, True, True, True, True]
+    vocab = Vocabulary(3, 2, np.array(parent), np.array(desc), np.array(is_leaf), np.ones(9))
+    probes = np.array([z, bits(0), bits(1), bits(2), bits(0, 1), bits(0, 3, 4), bits(1, 5, 6, 7),
+                       bits(2, 3), np.full(32, 255, np.uint8)])
+    got = vocab.leaf_nodes(probes).tolist()
+    assert got == [_greedy_descent(vocab, d) for d in probes]
+    assert got[0] == 4 and got[4] == 4  # ties at the root (1, 2, 3 equidistant), then between 4 and 5
+    rng = np.random.default_rng(5)
+    x = rng.integers(0, 256, (300, 32), dtype=np.uint8)
+    assert vocab.leaf_nodes(x).tolist() == [_greedy_descent(vocab, d) for d in x]
+    assert vocab.leaf_nodes(np.zeros((0, 32), np.uint8)).shape == (0,)
+
+
+def test_the_shipped_vocabulary_descends_kitti_descriptors_as_the_reference(orb):
+    vocab = Vocabulary.load(SHIPPED_ORB)
+    d = orb.extract(_grey(sorted((KITTI).rglob("*.png"))[0])).descriptors[:150]
+    assert vocab.leaf_nodes(d).tolist() == [_greedy_descent(vocab, row) for row in d]
+
+
 def test_training_descriptors_land_in_the_leaf_they_were_clustered_into():
     x = np.random.default_rng(0).integers(0, 256, (4000, 32), dtype=np.uint8)
     tree = build_tree(x, k=8, levels=3, seed=0, max_iterations=10)

@@ -14,6 +14,7 @@ from canopy.backend.line_factors import (line_custom_factor, line_endpoint_measu
                                          right_shift)
 from canopy.backend.stereo_ba import StereoEdges, bundle_adjust_points, edge_chi2
 from canopy.frontend.geometry import se3_inv
+from shared.arrays import unique_sorted
 
 X = gtsam.symbol_shorthand.X
 L = gtsam.symbol_shorthand.L
@@ -46,7 +47,7 @@ class LocalBundleAdjustmentMixin:
             return
         # every edge's keypoint by one gather from the window keyframes' arrays laid end to end
         # (one masked gather per keyframe cost ~2 ms per KITTI keyframe)
-        kf_ids = np.unique(e_kf)
+        kf_ids = unique_sorted(e_kf)
         kfs = [self.keyframes[k] for k in kf_ids.tolist()]
         start = np.cumsum([0] + [len(kf.uv) for kf in kfs])[:-1]
         row = start[np.searchsorted(kf_ids, e_kf)] + e_kp
@@ -66,7 +67,7 @@ class LocalBundleAdjustmentMixin:
             values.insert(L(lid), self.landmarks[lid].position)
         if lines is not None:
             l_kf, l_id, l_coef, l_right, l_seg = lines
-            for lid in np.unique(l_id).tolist():
+            for lid in unique_sorted(l_id).tolist():
                 values.insert(EA(lid), self.lines[lid].endpoints[0])
                 values.insert(EB(lid), self.lines[lid].endpoints[1])
             # edges far off at the initial estimate stay out of the graph (their residual would
@@ -118,7 +119,7 @@ class LocalBundleAdjustmentMixin:
             for j in np.flatnonzero(bad).tolist():
                 self._remove_observation(int(e_lm[j]), int(e_kf[j]))
         if lines is not None and len(l_kf):
-            for lid in np.unique(l_id).tolist():
+            for lid in unique_sorted(l_id).tolist():
                 self.lines[lid].endpoints = np.stack([np.asarray(values.atPoint3(EA(lid)), float),
                                                       np.asarray(values.atPoint3(EB(lid)), float)])
             judged = l_active | l_gated

@@ -12,6 +12,8 @@ from itertools import chain
 
 import numpy as np
 
+from shared.arrays import unique_sorted
+
 
 @dataclass
 class Keyframe:
@@ -67,7 +69,7 @@ def _sorted_unique_ids(ids: np.ndarray) -> np.ndarray:
         return ids
     top = int(ids.max())
     if top > 64 * len(ids) + 4096:
-        return np.unique(ids)
+        return unique_sorted(ids)
     present = np.zeros(top + 1, bool)
     present[ids] = True
     return np.flatnonzero(present).astype(np.int64)

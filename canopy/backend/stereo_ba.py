@@ -163,8 +163,17 @@ class _Structure:
 
 
 def _mv(M: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Batched matrix-vector product (matmul on stacks of small matrices beats einsum ~10x)."""
+    """Batched matrix-vector product (matmul on stacks of small matrices beats einsum ~10x).
+    ``np.matvec`` (numpy >= 2.2) is the same gufunc loop as ``(M @ v[..., None])[..., 0]``, bit for
+    bit, without the trailing unit axis (issue 8: ~25 % less per call on KITTI's ~7 k edges)."""
+    return _MATVEC(M, v)
+
+
+def _matvec_by_matmul(M: np.ndarray, v: np.ndarray) -> np.ndarray:
     return (M @ v[..., None])[..., 0]
+
+
+_MATVEC = getattr(np, "matvec", _matvec_by_matmul)
 
 
 def _inv_sym3(H: np.ndarray, lam: float) -> np.ndarray:

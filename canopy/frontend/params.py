@@ -223,6 +223,15 @@ class TrackingParams:
     line_max_depth_baselines: float = 60.0  # new map lines: both endpoints closer than this
     line_weight_in_count: int = 1       # a line inlier counts as this many point inliers
 
+    # --- noisy sensor (issue 9; canopy.frontend.noisy_features.refinement_pair) ---------------
+    # Sub-pixel stereo refinement (the SAD parabola) on a smoothed copy of the pair when the left
+    # image's robust noise sigma (canopy.enhance.noise.estimate_noise, grey levels) is at least
+    # subpixel_denoise_sigma: the keypoints and descriptor matches stay those of the raw frame,
+    # only u_right (the depth) is measured on the smoothed pair. 0: off. subpixel_denoise_blur:
+    # the Gaussian's sigma in px (level-0 pixels); 0 = the guided self-filter of canopy.enhance.noise.
+    subpixel_denoise_sigma: float = 0.0
+    subpixel_denoise_blur: float = 2.0  # the best sum over KITTI's 4 noisy cells (two noise draws)
+
     def disparity_offset_for(self, extractor: str) -> float:
         """The calibrated disparity offset for keypoints found by ``extractor`` (Features.extractor)."""
         return self.disparity_offset_cells_px if extractor == "cells" else self.disparity_offset_px
@@ -256,6 +265,8 @@ class TrackingParams:
         need(0 <= self.sad_snr_low < self.sad_snr_high, "sad_snr_low", "must be >= 0 and < sad_snr_high")
         need(self.subpixel_search >= 1, "subpixel_search", "must be >= 1")
         need(self.subpixel_normalise in ("centre", "mean"), "subpixel_normalise", "must be 'centre' or 'mean'")
+        need(self.subpixel_denoise_sigma >= 0, "subpixel_denoise_sigma", "must be >= 0 (0: off)")
+        need(self.subpixel_denoise_blur >= 0, "subpixel_denoise_blur", "must be >= 0 (0: guided filter)")
         need(abs(self.disparity_offset_px) < 5, "disparity_offset_px", "must be within +-5 px")
         need(abs(self.disparity_offset_cells_px) < 5, "disparity_offset_cells_px", "must be within +-5 px")
         need(self.search_radius > 0, "search_radius", "must be > 0")

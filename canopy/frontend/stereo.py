@@ -19,7 +19,7 @@ import numpy as np
 
 from canopy.frontend.features import Features
 from canopy.frontend.matching import as_words, best_two, hamming_pairs, unique_by_reference
-from canopy.frontend.noisy_features import accept_sad
+from canopy.frontend.noisy_features import accept_sad, refinement_pair
 from canopy.frontend.params import TrackingParams
 from shared.types import StereoCalibration
 
@@ -217,7 +217,8 @@ def match_stereo(left: Features, right: Features, left_img: np.ndarray, right_im
     keep = unique_by_reference(li, ri, best_d[li])
     li, ri = li[keep], ri[keep]
 
-    ur, sad, ok = subpixel_refine(left_img, right_img, left.uv[li].astype(np.float64),
+    ref_left, ref_right, _ = refinement_pair(left_img, right_img, params)
+    ur, sad, ok = subpixel_refine(ref_left, ref_right, left.uv[li].astype(np.float64),
                                   right.uv[ri, 0].astype(np.float64), left.octave[li], scale_factors,
                                   params.subpixel_window, params.subpixel_search, params.subpixel_normalise)
     li, ur, sad = li[ok], ur[ok], sad[ok]

@@ -70,9 +70,12 @@ class LoopCloser:
             return
         lids = resolve_array(kf.landmark_ids, self.alias)
         ok = np.flatnonzero((lids >= 0) & np.isfinite(P).all(axis=1))
-        for i, lid in zip(ok.tolist(), lids[ok].tolist()):
-            self.positions[lid] = P[i].copy()
-            self.landmark_ref.setdefault(lid, kf.index)
+        ids = lids[ok].tolist()
+        # rows of one fresh copy (nothing writes a stored position in place): the dict is filled
+        # at C level, in the same order as a per-landmark loop would (issue 8: loop-closer CPU)
+        self.positions.update(zip(ids, P[ok]))
+        ref, index = self.landmark_ref, kf.index
+        ref.update((lid, index) for lid in ids if lid not in ref)
 
     def path_length(self, a: int, b: int) -> float:
         """Distance travelled between keyframes ``a`` and ``b`` along the keyframe sequence."""

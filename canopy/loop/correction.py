@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from canopy.loop.pose_graph import correction_for
+from shared.arrays import unique_sorted
 
 
 def corrections_from_arrays(keyframe_ids: np.ndarray, corrections: np.ndarray) -> dict[int, np.ndarray]:
@@ -45,7 +46,7 @@ def refresh_update(mapper, update, alias: dict[int, int] | None = None) -> None:
         # seeing that tree); culled ones leave tracking's view
         if alias:
             from canopy.loop.full_ba import resolve_array
-            ids = np.unique(resolve_array(ids, alias))
+            ids = unique_sorted(resolve_array(ids, alias))
         ids = np.array([i for i in ids.tolist() if i in mapper.landmarks], np.int64)
         update.landmark_ids = ids
         update.descriptors = np.array([mapper.landmarks[i].descriptor for i in ids.tolist()], np.uint8).reshape(-1, 32)

@@ -23,6 +23,7 @@ from canopy.loop.database import KeyframeDatabase
 from canopy.loop.keyframe import PlaceKeyframe
 from canopy.loop.params import LoopParams
 from canopy.loop.verify import LoopConstraint, verify_candidate
+from shared.arrays import unique_sorted
 from shared.types import StereoCalibration
 
 
@@ -38,7 +39,7 @@ class Covisibility:
         mine = self._counts.setdefault(kf, {})
         others: list[int] = []
         get = self._observers.get
-        for lid in np.unique(ids[ids >= 0]).tolist():
+        for lid in unique_sorted(ids[ids >= 0]).tolist():
             obs = get(lid)
             if obs is None:
                 self._observers[lid] = [kf]

@@ -25,6 +25,7 @@ from canopy.frontend.geometry import se3_inv
 from canopy.frontend.matching import as_words, match_in_window
 from canopy.loop.keyframe import PlaceKeyframe
 from canopy.loop.params import LoopParams
+from shared.arrays import unique_sorted
 from shared.types import StereoCalibration
 
 X = gtsam.symbol_shorthand.X
@@ -147,7 +148,7 @@ def global_bundle_adjust(keyframes: dict[int, PlaceKeyframe], poses: dict[int, n
     uv = np.empty((n, 2))
     ur = np.empty(n)
     octv = np.empty(n, np.int64)
-    for k in np.unique(e_kf).tolist():
+    for k in unique_sorted(e_kf).tolist():
         m = e_kf == k
         kf = keyframes[k]
         uv[m] = np.asarray(kf.uv, float)[e_kp[m]]
@@ -160,7 +161,7 @@ def global_bundle_adjust(keyframes: dict[int, PlaceKeyframe], poses: dict[int, n
     edge_factor = np.where(bearing_lm, params.full_ba_bearing_only_sigma_factor, 1.0)
     level_scale = params.scale_factor ** octv.astype(float) * edge_factor
     pixel_sigma = float(params.pixel_sigma)
-    lm_ids = np.unique(e_lm)
+    lm_ids = unique_sorted(e_lm)
     K = gtsam.Cal3_S2Stereo(calib.fx, calib.fy, 0.0, calib.cx, calib.cy, calib.baseline)
     Kmono = gtsam.Cal3_S2(calib.fx, calib.fy, 0.0, calib.cx, calib.cy)
     noise_cache: dict = {}
@@ -173,7 +174,7 @@ def global_bundle_adjust(keyframes: dict[int, PlaceKeyframe], poses: dict[int, n
             m = noise_cache[(is_stereo, o, pixel_sigma, factor)] = gtsam.noiseModel.Robust.Create(hub, base)
         return m
 
-    kf_ids = sorted(set(np.unique(e_kf).tolist()) | {fixed})
+    kf_ids = sorted(set(unique_sorted(e_kf).tolist()) | {fixed})
     values = gtsam.Values()
     for k in kf_ids:
         values.insert(X(k), gtsam.Pose3(np.asarray(poses[k], float)))
@@ -226,7 +227,7 @@ def global_bundle_adjust(keyframes: dict[int, PlaceKeyframe], poses: dict[int, n
             # are sharper (day-loop: 0.35 px), and a test at 1 px keeps observations 3 sigma off that
             # then pull the second pass. Estimated on the edges that pass the assumed test.
             inl = active & (err2 / pixel_sigma**2 <= bound)
-            n_par = 3 * len(np.unique(e_lm[inl])) + 6 * max(len(np.unique(e_kf[inl])) - 1, 0)
+            n_par = 3 * len(unique_sorted(e_lm[inl])) + 6 * max(len(unique_sorted(e_kf[inl])) - 1, 0)
             if params.full_ba_bearing_only_sigma_factor != 1.0:  # the noise of the edges at pixel_sigma
                 inl = inl & ~bearing_lm
             est = estimate_pixel_noise(res, octv, params.scale_factor, inl, n_par)

@@ -15,7 +15,7 @@ def loop_keyframe_message(kf: KeyframeData, mapper, update: LocalMapUpdate) -> L
     """The inserted keyframe as the loop closer needs it: tracking's keypoints with the
     landmarks the map assigned to them, its pose after local BA, and the window poses."""
     rec = mapper.keyframes[kf.index]
-    return LoopKeyframe(landmark_positions=landmark_positions(mapper, rec.landmark), index=int(kf.index), timestamp=float(kf.timestamp), T_world_cam=rec.T_world_cam.copy(),
+    return LoopKeyframe(landmark_positions=landmark_positions(mapper, rec.landmark, update), index=int(kf.index), timestamp=float(kf.timestamp), T_world_cam=rec.T_world_cam.copy(),
                         uv=np.asarray(kf.uv, np.float32), u_right=np.asarray(kf.u_right, np.float32),
                         depth=np.asarray(kf.depth, np.float32), octave=np.asarray(kf.octave, np.int32),
                         descriptors=np.asarray(kf.descriptors, np.uint8), landmark_ids=np.asarray(rec.landmark, np.int64),
@@ -24,11 +24,23 @@ def loop_keyframe_message(kf: KeyframeData, mapper, update: LocalMapUpdate) -> L
                         sent_at=time.time())
 
 
-def landmark_positions(mapper, landmark_ids: np.ndarray) -> np.ndarray:
-    """(N,3) world positions of the landmarks a keyframe's keypoints observe (NaN: none)."""
+def landmark_positions(mapper, landmark_ids: np.ndarray, update: LocalMapUpdate | None = None) -> np.ndarray:
+    """(N,3) world positions of the landmarks a keyframe's keypoints observe (NaN: none).
+
+    ``update``: the local map just built from this same map state (sorted ids, positions copied
+    from the landmarks): the keyframe is in its window, so its landmarks are looked up there in
+    one ``searchsorted`` (a dict lookup and a row write per keypoint cost ~0.8 ms per KITTI
+    keyframe on local mapping's thread); any id it lacks is read from the map as before."""
     ids = np.asarray(landmark_ids, np.int64)
     out = np.full((len(ids), 3), np.nan)
-    for i in np.flatnonzero(ids >= 0).tolist():
+    rest = ids >= 0
+    if update is not None and len(update.landmark_ids) and rest.any():
+        known = np.asarray(update.landmark_ids, np.int64)
+        j = np.minimum(np.searchsorted(known, ids), len(known) - 1)
+        hit = rest & (known[j] == ids)
+        out[hit] = np.asarray(update.positions, float).reshape(-1, 3)[j[hit]]
+        rest &= ~hit
+    for i in np.flatnonzero(rest).tolist():
         lm = mapper.landmarks.get(int(ids[i]))
         if lm is not None:
             out[i] = lm.position

@@ -21,6 +21,7 @@ import numpy as np
 
 from canopy.frontend.geometry import se3_inv
 from canopy.loop.params import LoopParams
+from shared.arrays import unique_sorted
 
 X = gtsam.symbol_shorthand.X
 
@@ -111,7 +112,7 @@ def correct_landmarks(positions: np.ndarray, reference_kf: np.ndarray, correctio
     positions = np.asarray(positions, float).reshape(-1, 3)
     reference_kf = np.asarray(reference_kf, np.int64).reshape(-1)
     out = positions.copy()
-    for r in np.unique(reference_kf).tolist():
+    for r in unique_sorted(reference_kf).tolist():
         sel = reference_kf == r
         C = correction_for(int(r), corrections)
         out[sel] = positions[sel] @ C[:3, :3].T + C[:3, 3]

@@ -29,6 +29,7 @@ from canopy.loop.detector import Covisibility
 from canopy.loop.keyframe import PlaceKeyframe, with_bow
 from canopy.loop.params import LoopParams
 from canopy.loop.verify import _pnp_ransac, match_by_nodes
+from shared.arrays import unique_sorted
 from shared.types import StereoCalibration
 
 
@@ -96,7 +97,7 @@ class PlaceMemory:
         if self._saved_covisibility:
             return self._covisibility.best(keyframe, n, min_shared)
         mine = self.keyframes[keyframe].landmark_ids
-        mine = np.unique(mine[mine >= 0])
+        mine = unique_sorted(mine[mine >= 0])
         counts = [(int(np.isin(kf.landmark_ids, mine, assume_unique=False).sum()), k)
                   for k, kf in self.keyframes.items() if k != keyframe]
         counts = sorted(((c, k) for c, k in counts if c >= min_shared), key=lambda ck: (-ck[0], ck[1]))

@@ -90,6 +90,8 @@ class LoopWorker:
         self.inbox = ctx.Queue() if process else queue.Queue()
         self.outbox = ctx.Queue() if process else queue.Queue()
         self.step_ms: list[float] = []       # the worker's real time per keyframe (BoW, query, verification, PGO)
+        self.step_cpu_ms: list[float] = []   # its thread CPU per keyframe (the load-robust figure: it runs niced)
+        self.bow_cpu_ms: list[float] = []    # of which the bag of words (vocabulary descent)
         self._ba = None                      # (child process, pipe, epoch of its snapshot, start time)
         self._runner = None                  # the worker thread or process
         self._tid: int | None = None
@@ -158,8 +160,13 @@ class LoopWorker:
         if not self.step_ms:
             return {}
         a = np.asarray(self.step_ms[-2000:], float)
-        return {"step_ms_p50": float(np.percentile(a, 50)), "step_ms_p95": float(np.percentile(a, 95)),
-                "step_ms_max": float(a.max()), "steps": len(self.step_ms)}
+        out = {"step_ms_p50": float(np.percentile(a, 50)), "step_ms_p95": float(np.percentile(a, 95)),
+               "step_ms_max": float(a.max()), "steps": len(self.step_ms)}
+        if self.step_cpu_ms:
+            c, b = np.asarray(self.step_cpu_ms, float), np.asarray(self.bow_cpu_ms, float)
+            out.update({"step_cpu_ms_p50": float(np.percentile(c, 50)), "step_cpu_ms_mean": float(c.mean()),
+                        "step_cpu_s": float(c.sum() / 1e3), "bow_cpu_ms_p50": float(np.percentile(b, 50))})
+        return out
 
     # ------------------------------------------------------------------ worker thread / process
     def _run(self) -> None:
@@ -217,9 +224,10 @@ class LoopWorker:
 
     def step(self, msg: LoopKeyframe) -> None:
         """One keyframe: bag of words, detection, verification and, on a loop, the pose graph."""
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.thread_time()
         kf = place_keyframe(msg, self.vocabulary)
         t_bow = (time.perf_counter() - t0) * 1e3
+        self.bow_cpu_ms.append((time.thread_time() - c0) * 1e3)
         closure = self.closer.add_keyframe(kf, {int(k): v for k, v in msg.window_poses.items()},
                                            epoch=int(msg.loop_epoch))
         if closure is not None and self._ba is not None:
@@ -239,6 +247,7 @@ class LoopWorker:
                                                    n_inliers=result.n_inliers, loops=result.loops,
                                                    timings_ms=result.timings_ms, sent_at=result.sent_at)))
         self.step_ms.append((time.perf_counter() - t0) * 1e3)
+        self.step_cpu_ms.append((time.thread_time() - c0) * 1e3)
         s = self.closer.detector.stats
         self.outbox.put(("extra", {"loops": self.closer.n_loops, "fused": len(self.closer.alias), "keyframes": s.keyframes,
                                    "queries": s.queries, "candidates": s.candidates, "consistent": s.consistent,

@@ -22,6 +22,7 @@ from canopy.backend.map_store import MapStoreAccess, local_map_update
 from canopy.frontend.messages import KeyframeData, LocalMapUpdate
 from canopy.mono.params import MonoParams
 from canopy.mono.triangulation import new_points_between
+from shared.arrays import unique_sorted
 from shared.types import StereoCalibration
 
 X = gtsam.symbol_shorthand.X
@@ -308,14 +309,14 @@ class MonoMapper(MapStoreAccess):
         lm_ids, e_kf, e_lm, e_kp = self._observation_edges(local, kf_set)
         uv = np.empty((len(e_kf), 2))
         octv = np.empty(len(e_kf), np.int64)
-        for k in np.unique(e_kf).tolist():
+        for k in unique_sorted(e_kf).tolist():
             m = e_kf == k
             uv[m] = self.keyframes[k].uv[e_kp[m]]
             octv[m] = self.keyframes[k].octave[e_kp[m]]
         return lm_ids, e_kf, e_lm, uv, octv
 
     def _edge_chi2(self, values, e_kf, e_lm, uv, octv, scale) -> np.ndarray:
-        T_cw = {k: se3_inv(values.atPose3(X(k)).matrix()) for k in np.unique(e_kf).tolist()}
+        T_cw = {k: se3_inv(values.atPose3(X(k)).matrix()) for k in unique_sorted(e_kf).tolist()}
         R = np.stack([T_cw[k][:3, :3] for k in e_kf.tolist()])
         t = np.stack([T_cw[k][:3, 3] for k in e_kf.tolist()])
         uniq, inv = np.unique(e_lm, return_inverse=True)
