@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 
 from canopy.frontend.geometry import transform
+from shared.arrays import unique_sorted
 from shared.types import StereoFrame
 
 if TYPE_CHECKING:
@@ -130,7 +131,7 @@ class TrackerLinesMixin:
         self._line_provisional[frame.index] = (new_ids[idx], ends_w, lines.desc[idx])
         self._line_view_dirty = True
         rows = np.flatnonzero((line_matched >= 0) | create)
-        self._ref_line_ids = np.unique(np.concatenate([line_matched[line_matched >= 0], new_ids[idx]]))
+        self._ref_line_ids = unique_sorted(np.concatenate([line_matched[line_matched >= 0], new_ids[idx]]))
         return dict(line_segments=lines.segs[rows].astype(np.float32),
                     line_segments_right=seg_r[rows].astype(np.float32),
                     line_descriptors=lines.desc[rows].copy(), line_ids=line_matched[rows].copy(),

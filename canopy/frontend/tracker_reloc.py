@@ -20,6 +20,7 @@ import numpy as np
 from canopy.frontend.geometry import se3_inv
 from canopy.frontend.matching import as_words
 from canopy.frontend.messages import TrackingResult
+from shared.arrays import unique_sorted
 
 LOST_NOT_RELOCALISED = "not_relocalised"   # no map keyframe recognised and verified yet
 
@@ -106,7 +107,7 @@ class TrackerRelocalisationMixin:
         kf = self._place.keyframes[keyframe]
         self._ref_kf = int(keyframe)
         self._T_ref = kf.T_world_cam.copy()
-        self._ref_ids = np.unique(kf.landmark_ids[kf.landmark_ids >= 0])
+        self._ref_ids = unique_sorted(kf.landmark_ids[kf.landmark_ids >= 0])
         self._frames_since_kf = 0
         self._entropy_first = None
         self._ref_tracked_first = None
