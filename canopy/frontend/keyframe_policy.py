@@ -31,13 +31,7 @@ def keyframe_reasons(p: TrackingParams, frames_since_kf: int, ratio: float | Non
         reasons.append("max_frames")
     if ref_tracked_first is not None and n_ref < p.min_tracked_fraction * ref_tracked_first:
         reasons.append("tracked_fraction")
-    # close_points_first_frame > 0: on the frame right after a keyframe the close rule needs fewer
-    # than that many tracked close points (ORB-SLAM3 on KITTI 06 never inserts back to back there:
-    # it re-finds the keyframe's new close points, we re-find about half; docs/notes/s10-keyframes.md)
-    close_bar = p.min_tracked_close
-    if p.close_points_first_frame > 0 and frames_since_kf <= 1:
-        close_bar = min(close_bar, p.close_points_first_frame)
-    if n_tracked_close < close_bar and n_new_close > p.min_new_close_points:
+    if n_tracked_close < p.min_tracked_close and n_new_close > p.min_new_close_points:
         reasons.append("close_points")
     return reasons
 

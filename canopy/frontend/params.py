@@ -190,9 +190,6 @@ class TrackingParams:
     # "motion_and_local" (also the motion-model landmark matches the local-map search did not
     # re-find, as ORB-SLAM's NeedNewKeyFrame sees them; canopy.frontend.keyframe_policy)
     keyframe_close_count: str = "local_map"
-    # > 0: the frame right after a keyframe fires the close rule only below this many tracked
-    # close points (instead of min_tracked_close); 0: off (canopy.frontend.keyframe_policy)
-    close_points_first_frame: int = 0
     min_init_points: int = 100          # stereo points needed to (re)start a map
     # Relocalisation (issue 10): after tracking is lost, the next frames are tracked against
     # the same local map from the constant-velocity prediction carried over the lost frames
@@ -283,7 +280,6 @@ class TrackingParams:
         need(0 < self.entropy_ratio_alpha < 1, "entropy_ratio_alpha", "must be in (0, 1)")
         need(self.keyframe_close_count in ("local_map", "motion_and_local"), "keyframe_close_count",
              "must be 'local_map' or 'motion_and_local'")
-        need(self.close_points_first_frame >= 0, "close_points_first_frame", "must be >= 0")
         need(self.min_frames_between_keyframes >= 0, "min_frames_between_keyframes", "must be >= 0")
         need(self.max_frames_between_keyframes > self.min_frames_between_keyframes,
              "max_frames_between_keyframes", "must exceed min_frames_between_keyframes")
