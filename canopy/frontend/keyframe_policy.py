@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from canopy.frontend.geometry import project_stereo
-
 from canopy.frontend.params import TrackingParams
 
 
@@ -34,28 +32,3 @@ def keyframe_reasons(p: TrackingParams, frames_since_kf: int, ratio: float | Non
     if n_tracked_close < p.min_tracked_close and n_new_close > p.min_new_close_points:
         reasons.append("close_points")
     return reasons
-
-
-# ORB-SLAM's pose optimisation drops a monocular edge above chi2(2 dof, 95 %) = 5.991 (in sigma^2)
-_CHI2_MONO_95 = 5.991
-
-
-def motion_only_close(close: np.ndarray, final_kps: np.ndarray, stage1, T_cw: np.ndarray, uv: np.ndarray,
-                      sigma1: np.ndarray, calib) -> int:
-    """Close keypoints tracked through the motion-model matches only (TrackingParams
-    ``keyframe_close_count = "motion_and_local"``). ORB-SLAM2/3 count every current-frame feature
-    with a map point after TrackLocalMap: the motion-model matches stay and the local-map search
-    only adds to them (Tracking::SearchLocalPoints skips matched points); our stage 2 replaces
-    them. This counts the stage-1 landmark matches (``stage1`` = (points, keypoint indices,
-    landmark ids, RANSAC inliers); ``sigma1`` their keypoints' sigma, px) whose keypoint is close
-    (``close``), not among ``final_kps`` (the local-map inliers' keypoints) and within ORB-SLAM's
-    chi2 gate at the final pose ``T_cw``. Temporary odometry points (id -1) do not count: ORB-SLAM
-    cleans them before NeedNewKeyFrame."""
-    X1, r1, ids1, inl1 = stage1
-    m = inl1 & (ids1 >= 0) & close[r1] & ~np.isin(r1, final_kps)
-    if not m.any():
-        return 0
-    proj, Pc = project_stereo(T_cw, X1[m], calib)
-    err2 = ((proj[:, :2] - uv[r1[m]]) ** 2).sum(axis=1) / sigma1[m] ** 2
-    ok = (Pc[:, 2] > 0) & (err2 < _CHI2_MONO_95)
-    return int(len(np.unique(r1[m][ok])))

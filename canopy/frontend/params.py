@@ -186,10 +186,6 @@ class TrackingParams:
     min_tracked_fraction: float = 0.75  # of the reference keyframe's tracked landmarks
     min_new_close_points: int = 70      # ORB-SLAM stereo: insert when few close points tracked
     min_tracked_close: int = 100
-    # What counts as a tracked close point: "local_map" (the local-map search's inliers) or
-    # "motion_and_local" (also the motion-model landmark matches the local-map search did not
-    # re-find, as ORB-SLAM's NeedNewKeyFrame sees them; canopy.frontend.keyframe_policy)
-    keyframe_close_count: str = "local_map"
     min_init_points: int = 100          # stereo points needed to (re)start a map
     # Relocalisation (issue 10): after tracking is lost, the next frames are tracked against
     # the same local map from the constant-velocity prediction carried over the lost frames
@@ -278,8 +274,6 @@ class TrackingParams:
         need(self.pose_opt_iterations >= 1, "pose_opt_iterations", "must be >= 1")
         need(self.chi2_mono > 0 and self.chi2_stereo > 0, "chi2_mono", "and chi2_stereo must be > 0")
         need(0 < self.entropy_ratio_alpha < 1, "entropy_ratio_alpha", "must be in (0, 1)")
-        need(self.keyframe_close_count in ("local_map", "motion_and_local"), "keyframe_close_count",
-             "must be 'local_map' or 'motion_and_local'")
         need(self.min_frames_between_keyframes >= 0, "min_frames_between_keyframes", "must be >= 0")
         need(self.max_frames_between_keyframes > self.min_frames_between_keyframes,
              "max_frames_between_keyframes", "must exceed min_frames_between_keyframes")

@@ -31,7 +31,7 @@ import numpy as np
 
 from canopy.frontend.cell_extractor import make_extractor
 from canopy.frontend.features import Features
-from canopy.frontend.keyframe_policy import entropy_ratio, keyframe_reasons, motion_only_close
+from canopy.frontend.keyframe_policy import entropy_ratio, keyframe_reasons
 from canopy.frontend.geometry import (differential_entropy, pose_information, se3_inv, stereo_pose_jacobian,
                                       transform)
 from canopy.frontend.map_tracking import MapTrackingMixin
@@ -357,7 +357,6 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
             # line terms carry the pose (robust rounds sort out the stage-1 point outliers)
             T_cw, inliers, from_prediction = T_pred_cw, np.ones(len(X), bool), True
 
-        stage1 = (X, r, ids, inliers)  # the motion-model matches (keyframe close count, keyframe_policy)
         t0 = _clock()
         est = None
         visible_ids = np.zeros(0, np.int64)
@@ -450,9 +449,6 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
         ratio = entropy_ratio(entropy, self._entropy_first)
         close = self._close(stereo)
         n_tracked_close = int((close[r] & inliers).sum())
-        if p.keyframe_close_count == "motion_and_local":
-            n_tracked_close += motion_only_close(close, r[inliers], stage1, T_cw, feats.uv,
-                                                 self._sigma(feats.octave[stage1[1]]), self.calib)
         n_new_close = int(close.sum()) - n_tracked_close
         since = self._frames_since_kf
         reasons = keyframe_reasons(p, since, ratio, n_ref, self._ref_tracked_first, n_tracked_close, n_new_close)
