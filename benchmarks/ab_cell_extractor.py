@@ -15,12 +15,13 @@ helper threads of OpenBLAS and OpenCV) of each, their ratios, and on how many im
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from ab_checkout import load_module  # noqa: E402  (a sibling: benchmarks/ is sys.path[0])
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -29,15 +30,6 @@ from canopy.config import load_run_config  # noqa: E402
 from canopy.sources import open_source  # noqa: E402
 
 FIELDS = ("uv", "octave", "response", "descriptors")
-
-
-def load_module(path: Path, name: str):
-    if not path.is_file():
-        raise SystemExit(f"ab_cell_extractor: no cell extractor at {path} (--base must be a checkout)")
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def main() -> int:

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import copy
-import importlib.util
 import os
 import pickle
 import subprocess
@@ -31,19 +30,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ab_checkout import load_module  # noqa: E402  (a sibling: benchmarks/ is sys.path[0])
+
 ROOT = Path(__file__).resolve().parents[1]
 if "--step" not in sys.argv:   # a step replay runs the checkout on its PYTHONPATH (the base's for the base)
     sys.path.insert(0, str(ROOT))
-
-
-def load_module(path: Path, name: str):
-    if not path.is_file():
-        raise SystemExit(f"ab_loop_closer: no {path} (--base must be a checkout)")
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module     # dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module
 
 
 def ab_bow(base_root: Path, rec: dict, vocabulary_path: Path) -> str:

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import hashlib
-import importlib.util
 import os
 import pickle
 import subprocess
@@ -28,6 +27,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+from ab_checkout import load_module  # noqa: E402  (a sibling: benchmarks/ is sys.path[0])
 
 ROOT = Path(__file__).resolve().parents[1]
 if "--replay" not in sys.argv:   # a replay runs the checkout on its PYTHONPATH (the base's for the base)
@@ -89,16 +90,6 @@ def replay(recording: Path, reps: int) -> None:
         checksum = f"{len(pts)} points, sum {pts.sum():.9f}, sha256 {digest}"
     import canopy
     print("REPLAY", " ".join(f"{x:.2f}" for x in per_kf), "|", checksum, "|", Path(canopy.__file__).parents[1])
-
-
-def load_module(path: Path, name: str):
-    if not path.is_file():
-        raise SystemExit(f"ab_mapping: no {path} (--base must be a checkout)")
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module     # dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module
 
 
 def ab_ba(base_root: Path, rec: dict, reps: int) -> str:
