@@ -1,7 +1,7 @@
 # One in-process run of a degraded preset cell (the grid's runner, benchmarks/bench_enhance_diagnose.run,
 # method auto), saving the estimated and true poses and the per-frame rows to an npz, for comparing
 # the smoothed sub-pixel refinement on / off frame by frame.
-# Usage: per_frame.py CELL|PRESET-clean OUT.npz [tracking.field=value ...]
+# Usage: per_frame.py CELL|PRESET-clean[-N] OUT.npz [tracking.field=value ...]
 import sys
 import numpy as np
 import benchmarks.bench_enhance_diagnose as bd
@@ -15,8 +15,8 @@ def ape(est, gt, align="se3"):
     return orig_ape(est, gt, align)
 bd.ape = ape
 preset = cell.split("-")[0] + "-" + cell.split("-")[1]
-if cell.endswith("-clean"):  # e.g. haze-row-clean: the clean preset, full length
-    path, n = f"/work/cache/synthetic/{preset}-seed0-full", None
+if "-clean" in cell:  # haze-row-clean: the clean preset, full length; day-loop-clean-300: its first 300 frames
+    path, n = f"/work/cache/synthetic/{preset}-seed0-full", (int(cell.split("-")[3]) if cell.count("-") == 3 else None)
 else:
     path, n = f"/work/cache/degraded/{cell}", int(cell.split("-")[2])
 out, rows = bd.run(path, f"/work/cache/synthetic/{preset}-seed0-full", "synthetic",
