@@ -78,8 +78,15 @@ def test_euroc_default_run_writes_every_output(tmp_path):
 def test_sigkill_of_an_actor_ends_run_cleanly(tmp_path, victim):
     endpoint = f"ipc://{tmp_path}/inspect"
     out = tmp_path / "run"
+    # half the dataset rate: the 95 frames then take ~9.5 s, so the signal sent once frame 15 is
+    # posed always lands mid-run (at full rate a late subscriber could see frame 15 near the end,
+    # and a run that finished first returns 0)
+    config = tmp_path / "euroc_half_rate.yaml"
+    config.write_text((ROOT / "configs" / "euroc.yaml").read_text().replace(
+        "  clock: lockstep\n", "  clock: realtime\n  realtime_speed: 0.5\n", 1))
+    assert "realtime_speed: 0.5" in config.read_text()
     proc = subprocess.Popen([sys.executable, str(ROOT / "launch.py"), "--dataset", "euroc", "--clock", "realtime",
-                             "--out", str(out), "--inspect", endpoint, "--quiet"],
+                             "--config", str(config), "--out", str(out), "--inspect", endpoint, "--quiet"],
                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         pids, killed_at, posed = {}, None, 0
