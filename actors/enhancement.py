@@ -9,12 +9,14 @@ two images' pixel work on two threads when ``pair_threads`` is 2.
 """
 from __future__ import annotations
 
+import threading
 import time
 
 import numpy as np
 
 from actors.backlog import FrameBacklog, max_frame_age
 from actors.runtime import Actor, ActorContext
+from actors.schedstat import thread_report, thread_schedstat
 from canopy.enhance.pair import PairEnhancer
 from protocol.messages import EndOfStream, FrameHandle
 from shared.errors import InputError
@@ -40,6 +42,10 @@ class EnhancementActor(Actor):
         self.backlog = FrameBacklog(max_frame_age(self.config["clock"], self.config["frame_period_s"],
                                                   self.config["max_lag_frames"]))
         self.methods: dict[str, int] = {}
+        # the threads' scheduler statistics from the first frame on (stats.json "threads": with
+        # ``pair_threads`` 2 the right image's pixel work is on a pool thread, counted as "other")
+        self.sched_start: dict[int, tuple[int, int]] | None = None
+        self.n_frames = 0
 
     def on_message(self, msg, ctx: ActorContext) -> None:
         self.backlog.push(msg)
@@ -48,6 +54,8 @@ class EnhancementActor(Actor):
         return 0.0 if self.backlog.has_work() else None
 
     def on_tick(self, ctx: ActorContext) -> float | None:
+        if self.sched_start is None:
+            self.sched_start = thread_schedstat()
         handle, dropped = self.backlog.pop()
         ctx.dropped += dropped
         if handle is None:
@@ -67,6 +75,7 @@ class EnhancementActor(Actor):
         check_pair(left_e, right_e, lay.height, lay.width, index)
         slot, gen = self.out_ring.write(index, stamp, [left_e, right_e])
         self.methods[info["method"]] = self.methods.get(info["method"], 0) + 1
+        self.n_frames += 1
         ctx.extra["methods"] = dict(self.methods)
         info = {k: v for k, v in info.items() if isinstance(v, (int, float, str, bool))}
         info["enhance_ms"] = enhance_ms
@@ -76,6 +85,9 @@ class EnhancementActor(Actor):
         return handle.sent_at
 
     def teardown(self, ctx: ActorContext) -> None:
+        if self.sched_start is not None:
+            ctx.extra["threads"] = thread_report(self.sched_start, thread_schedstat(),
+                                                 {threading.get_native_id(): "enhancement"}, self.n_frames)
         if getattr(self, "enhancer", None) is not None:
             self.enhancer.close()
         self.in_ring.close()

@@ -9,9 +9,11 @@ driver would.
 """
 from __future__ import annotations
 
+import threading
 import time
 
 from actors.runtime import Actor, ActorContext
+from actors.schedstat import thread_report, thread_schedstat
 from canopy.sources import open_source
 from protocol.messages import EndOfStream, FrameDone, FrameHandle, Pause, Resume, Start
 from shared.ring import FrameRing
@@ -39,6 +41,9 @@ class SourceActor(Actor):
         self.t0 = 0.0
         self.sent = 0
         self.paused_at: float | None = None  # remote pause (inspection request): no frame released
+        # the threads' scheduler statistics from the first frame read on (stats.json "threads": the
+        # source's CPU per frame, mostly PNG decoding, is taken from the same two cores as tracking's)
+        self.sched_start: dict[int, tuple[int, int]] | None = None
 
     def on_control(self, msg, ctx: ActorContext) -> None:
         if isinstance(msg, Start):
@@ -89,6 +94,8 @@ class SourceActor(Actor):
         if not self.lockstep and time.monotonic() - self._release_time(i) > self.period:
             ctx.dropped += 1  # too late to be useful: a live camera would have overwritten it
             return None
+        if self.sched_start is None:
+            self.sched_start = thread_schedstat()
         read_at = time.time()  # end-to-end latency (frame read -> pose published) starts here
         try:
             frame = self.source.frame(i)
@@ -109,4 +116,7 @@ class SourceActor(Actor):
         return 0.0
 
     def teardown(self, ctx: ActorContext) -> None:
+        if self.sched_start is not None:
+            ctx.extra["threads"] = thread_report(self.sched_start, thread_schedstat(),
+                                                 {threading.get_native_id(): "source"}, self.sent)
         self.ring.close()

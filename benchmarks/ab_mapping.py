@@ -52,9 +52,9 @@ def record(dataset: str, out: Path) -> None:
         keyframes.append(pickle.dumps(kf))
         return insert(self, kf)
 
-    def solve_recorded(*args):
+    def solve_recorded(*args, **kwargs):   # kwargs (final_projection) are outputs: not recorded
         calls.append(args)
-        return solve(*args)
+        return solve(*args, **kwargs)
 
     LocalMapper.insert_keyframe, local_ba.bundle_adjust_points = insert_recorded, solve_recorded
     try:

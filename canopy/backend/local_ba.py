@@ -12,7 +12,7 @@ import numpy as np
 
 from canopy.backend.line_factors import (line_custom_factor, line_endpoint_measurements, line_projection_factors,
                                          right_shift)
-from canopy.backend.stereo_ba import StereoEdges, bundle_adjust_points, edge_chi2
+from canopy.backend.stereo_ba import StereoEdges, bundle_adjust_points, edge_chi2, projection_chi2
 from canopy.frontend.geometry import se3_inv
 from shared.arrays import unique_sorted
 
@@ -152,9 +152,16 @@ class LocalBundleAdjustmentMixin:
         for _ in range(p.ba_passes):
             a = np.flatnonzero(active)
             edges = StereoEdges(pose_of_edge[a], point_of_edge[a], meas[a], stereo[a], sigma[a], huber[a])
-            T_cw, X, _ = bundle_adjust_points(T_cw, len(local), X, edges, self.calib, p.ba_iterations)
-            # the last pass's test is at the final estimate: it also decides the write-back below
-            over = edge_chi2(T_cw, X, all_edges, self.calib, p.min_depth) > thr
+            final = []
+            T_cw, X, _ = bundle_adjust_points(T_cw, len(local), X, edges, self.calib, p.ba_iterations,
+                                              final_projection=final)
+            # the last pass's test is at the final estimate: it also decides the write-back below.
+            # When the pass had every edge, LM's own projection at its result is that of all_edges
+            # (same arrays, per-edge arithmetic): no second projection
+            if final and len(a) == len(active):
+                over = projection_chi2(*final[0], sigma, p.min_depth) > thr
+            else:
+                over = edge_chi2(T_cw, X, all_edges, self.calib, p.min_depth) > thr
             if not (active & over).any():
                 break
             active &= ~over

@@ -210,6 +210,7 @@ class _Linearised:
             r, Pc, R, front = _project(T_cw, X, edges, calib)
             projected = (r, Pc, R, front), _robust_cost(r, front, edges)
         (r, Pc, R, front), (self.cost, w) = projected
+        self.projection = projected[0]
         loc = st.loc
         Jc, Jx = _jacobians(Pc, R, edges, calib, loc)                    # Jc: local edges only
         Wr = r * w[:, None]
@@ -269,7 +270,12 @@ def edge_chi2(T_cw: np.ndarray, X: np.ndarray, edges: StereoEdges, calib: Stereo
               min_depth: float = _MIN_DEPTH) -> np.ndarray:
     """Squared reprojection error of every edge over sigma^2 (inf closer than ``min_depth``)."""
     r, Pc, _, _ = _project(T_cw, X, edges, calib)
-    chi2 = (r**2).sum(axis=1) / edges.sigma**2
+    return projection_chi2(r, Pc, edges.sigma, min_depth)
+
+
+def projection_chi2(r: np.ndarray, Pc: np.ndarray, sigma: np.ndarray, min_depth: float = _MIN_DEPTH) -> np.ndarray:
+    """``edge_chi2`` from a projection already made (``_project``'s residuals and camera points)."""
+    chi2 = (r**2).sum(axis=1) / sigma**2
     chi2[~(Pc[:, 2] > min_depth)] = np.inf
     return chi2
 
@@ -282,9 +288,15 @@ def _apply(T_cw: np.ndarray, X: np.ndarray, dc: np.ndarray, dp: np.ndarray) -> t
 
 
 def bundle_adjust_points(T_cw: np.ndarray, n_local: int, X: np.ndarray, edges: StereoEdges,
-                         calib: StereoCalibration, max_iterations: int) -> tuple[np.ndarray, np.ndarray, int]:
+                         calib: StereoCalibration, max_iterations: int,
+                         final_projection: list | None = None) -> tuple[np.ndarray, np.ndarray, int]:
     """Levenberg-Marquardt on the local poses ``T_cw[:n_local]`` and all points ``X``; the poses
-    ``T_cw[n_local:]`` stay fixed. Returns (T_cw, X, iterations)."""
+    ``T_cw[n_local:]`` stay fixed. Returns (T_cw, X, iterations).
+
+    ``final_projection``: a list to which the residuals and camera-frame points of ``edges`` at
+    the returned estimate are appended, ``(r, Pc)`` as ``_project`` gives them. LM has made that
+    projection already (to accept its last step), so the caller's outlier test after BA
+    (``projection_chi2``) needs no second one (issue 8: ~1 ms per KITTI BA call)."""
     T_cw = np.asarray(T_cw, float).copy()
     X = np.asarray(X, float).copy()
     if len(edges.pose) == 0:
@@ -292,6 +304,7 @@ def bundle_adjust_points(T_cw: np.ndarray, n_local: int, X: np.ndarray, edges: S
     lam = LAMBDA_INITIAL
     st = _Structure.build(edges, n_local, len(X))
     lin = _Linearised(T_cw, X, edges, n_local, calib, st)
+    current = lin.projection      # the projection at (T_cw, X)
     it = 0
     for it in range(1, max_iterations + 1):
         accepted = False
@@ -312,10 +325,13 @@ def bundle_adjust_points(T_cw: np.ndarray, n_local: int, X: np.ndarray, edges: S
             break
         old = lin.cost
         T_cw, X = T_try, X_try
+        current = proj
         lam = max(lam / LAMBDA_FACTOR, 1e-12)
         # converged or out of iterations: stop before linearising at the new point (its Jacobians
         # would be used by no further step)
         if old - robust[0] < RELATIVE_ERROR_TOL * old or it == max_iterations:
             break
         lin = _Linearised(T_cw, X, edges, n_local, calib, st, projected=(proj, robust))
+    if final_projection is not None:
+        final_projection.append(current[:2])
     return T_cw, X, it
