@@ -170,3 +170,43 @@ def test_local_map_ids_are_the_sorted_distinct_landmarks_of_the_window():
         out = _sorted_unique_ids(ids)
         assert out.dtype == np.int64
         np.testing.assert_array_equal(out, ref)
+
+
+def test_final_projection_is_the_projection_at_the_returned_estimate():
+    """``bundle_adjust_points(..., final_projection=...)`` hands back LM's own projection of the
+    edges at the estimate it returns, so local BA's outlier test reuses it: its chi2 must equal a
+    fresh ``edge_chi2`` there bit for bit, whether LM converged, ran out of iterations after one
+    step, or accepted no step at all (started at the optimum)."""
+    from canopy.backend.stereo_ba import StereoEdges, bundle_adjust_points, edge_chi2, projection_chi2
+
+    rng = np.random.default_rng(7)
+    poses, X = scene(rng, n=80)
+    T_true = np.stack([se3_inv(T) for T in poses])
+    pose, point, meas = [], [], []
+    for k in range(N_KF):
+        m, _ = project_stereo(T_true[k], X, CALIB)
+        pose.append(np.full(len(X), k))
+        point.append(np.arange(len(X)))
+        meas.append(m)
+    pose, point, meas = np.concatenate(pose), np.concatenate(point), np.concatenate(meas)
+    noisy = meas + rng.normal(0, 0.5, meas.shape)
+    noisy[::17] += 25.0                                   # a few outliers for the Huber kernel
+    stereo = rng.random(len(pose)) < 0.8
+    sigma = 1.2 ** rng.integers(0, 4, len(pose))
+    n_local = N_KF - 1
+    T_init = T_true.copy()
+    for i in range(n_local):
+        T_init[i] = se3_exp(np.r_[0.01 * rng.standard_normal(3), 0.03 * rng.standard_normal(3)]) @ T_init[i]
+    X_init = X + 0.05 * rng.standard_normal(X.shape)
+    cases = [(noisy, T_init, X_init, 30), (noisy, T_init, X_init, 1), (meas, T_true, X, 10)]
+    iterations, unchanged = [], []
+    for m, T0, X0, max_it in cases:
+        edges = StereoEdges(pose, point, m, stereo, sigma, np.full(len(pose), 2.8))
+        final = []
+        T, Xo, it = bundle_adjust_points(T0, n_local, X0, edges, CALIB, max_it, final_projection=final)
+        iterations.append(it)
+        unchanged.append(np.array_equal(T, T0) and np.array_equal(Xo, X0))
+        assert len(final) == 1
+        np.testing.assert_array_equal(projection_chi2(*final[0], sigma, 0.05), edge_chi2(T, Xo, edges, CALIB, 0.05))
+    assert iterations[0] > 1 and iterations[1] == 1      # converged after several steps; stopped after one
+    assert unchanged == [False, False, True]              # at the optimum no step is accepted
