@@ -67,3 +67,38 @@ def test_noise_scaled_fallback_finds_the_same_corners_again_and_keeps_the_spread
     # (docs/notes/s9-jitter.md), the cells extractor a third at most
     orb = OrbExtractor(replace(base, extractor="opencv")).extract(a)
     assert spread < 0.4 < max_block_share(orb.uv, w, h)
+
+
+def test_noise_gate_keeps_cv2_orb_on_clean_and_enhanced_frames_and_spreads_noisy_ones(euroc_image):
+    from canopy.frontend.noisy_features import NoiseGatedExtractor, tracking_extractor
+    from canopy.frontend.track_health import image_noise_sigma
+
+    p = replace(TrackingParams(), noisy_extractor_sigma=2.5, noisy_extractor_n_features=1200,
+                cell_fallback_noise_factor=4.0)
+    gate = tracking_extractor(p, responses=False)
+    assert isinstance(gate, NoiseGatedExtractor)
+    orb = OrbExtractor(p)
+    h, w = euroc_image.shape
+    # the clean frame (sigma ~2.2 with its texture) gets exactly cv2.ORB's features
+    assert image_noise_sigma(euroc_image) < 2.5
+    clean, ref = gate.extract(euroc_image), orb.extract(euroc_image)
+    assert gate.last_used == "opencv" and np.array_equal(clean.uv, ref.uv)
+    noisy = with_noise(euroc_image, 3.0, 1)
+    f = gate.extract(noisy)
+    assert gate.last_used == "cells" and len(f.uv) == 1200
+    assert max_block_share(f.uv, w, h) < 0.4 < max_block_share(orb.extract(noisy).uv, w, h)
+    # a frame the enhancement changed (the AFE rule passes a fallback threshold) keeps cv2.ORB
+    g = gate.extract(noisy, 25, 10, 1000)
+    assert gate.last_used == "opencv" and np.array_equal(g.uv, orb.extract(noisy, 25, 10, 1000).uv)
+
+
+def test_noise_gate_off_gives_the_configured_extractor_and_refuses_a_bad_sigma():
+    from canopy.frontend.noisy_features import NoiseGatedExtractor, tracking_extractor
+    from shared.errors import ConfigError
+
+    assert isinstance(tracking_extractor(TrackingParams()), OrbExtractor)
+    assert isinstance(tracking_extractor(replace(TrackingParams(), extractor="cells")), CellExtractor)
+    with pytest.raises(ValueError, match="noisy_extractor_sigma"):
+        NoiseGatedExtractor(TrackingParams())
+    with pytest.raises(ConfigError, match="noisy_extractor_sigma"):
+        replace(TrackingParams(), noisy_extractor_sigma=-1.0)
