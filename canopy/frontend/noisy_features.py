@@ -1,4 +1,5 @@
-"""Front-end rules for hazy and noisy frames (issue 9): how strict stereo matching must be.
+"""Front-end rules for hazy and noisy frames (issue 9): how strict stereo matching must be, which
+pair the sub-pixel refinement runs on, and which extractor a noisy image gets (``NoiseGatedExtractor``).
 
 Why (measured on KITTI 06 with haze β 0.06 /m and the grid's sensors, docs/notes/s4-dark.md):
 haze lowers the contrast of every patch by the transmission t (Koschmieder), sensor noise
