@@ -1,4 +1,5 @@
-"""Front-end rules for hazy and noisy frames (issue 9): how strict stereo matching must be.
+"""Front-end rules for hazy and noisy frames (issue 9): how strict stereo matching must be, which
+pair the sub-pixel refinement runs on, and which extractor a noisy image gets (``NoiseGatedExtractor``).
 
 Why (measured on KITTI 06 with haze β 0.06 /m and the grid's sensors, docs/notes/s4-dark.md):
 haze lowers the contrast of every patch by the transmission t (Koschmieder), sensor noise
@@ -29,11 +30,16 @@ EuRoC 4.6).
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
 
 from canopy.enhance.noise import denoise, estimate_noise
+from canopy.frontend.cell_extractor import CellExtractor, make_extractor
+from canopy.frontend.features import OrbExtractor
 from canopy.frontend.params import TrackingParams
+from canopy.frontend.track_health import image_noise_sigma
 
 
 def sad_snr(median_sad: float, half_window: int, noise_sigma: float) -> float:
@@ -89,3 +95,51 @@ def refinement_pair(left_img: np.ndarray, right_img: np.ndarray, params: Trackin
     else:
         blur = lambda img: denoise(img, sigma)  # noqa: E731  # the right image with the left's σ
     return blur(left_img), blur(right_img), sigma
+
+
+class NoiseGatedExtractor:
+    """cv2.ORB (``OrbExtractor``) on clean images, ORB-SLAM's per-cell extraction (``CellExtractor``,
+    its fallback threshold at ``cell_fallback_noise_factor`` x the noise sigma) on images whose
+    Immerkær noise sigma (``track_health.image_noise_sigma``) is at least ``noisy_extractor_sigma``.
+
+    Why (EuRoC, a nearly still camera, docs/notes/s9-jitter.md and s11-noise.md): the pose of a
+    still camera jitters by how far its keypoints move from frame to frame times how well their
+    layout fixes the translation. cv2.ORB's strongest corners sit on one textured wall patch (84 %
+    of them), which fixes the translation 4x less well than corners over the whole image; with a
+    noisy sensor the per-cell extraction spreads them, and its fallback threshold at 4 sigma
+    (instead of ORB-SLAM's fixed 7 grey levels) keeps the corners that the noise cannot flip: two
+    noise draws of one frame give the same corner 59 -> 77 % of the time (tests/test_noisy_fallback.py).
+    Frames the enhancement changed (the AFE rule passes ``fallback_threshold``) keep cv2.ORB, as
+    ``CellExtractor`` does with ``extractor_enhanced: opencv``. Each image is judged by its own
+    sigma (the right image's is ~0.2 below the left's on EuRoC); ``extract`` has the interface of
+    both extractors.
+    """
+
+    def __init__(self, params: TrackingParams, responses: bool = True):
+        if params.noisy_extractor_sigma <= 0:
+            raise ValueError("NoiseGatedExtractor: params.noisy_extractor_sigma must be > 0 "
+                             f"(got {params.noisy_extractor_sigma!r})")
+        self.params = params
+        self.opencv = OrbExtractor(params)
+        n = params.noisy_extractor_n_features or params.n_features
+        self.cells = CellExtractor(replace(params, extractor="cells", n_features=n), responses)
+        self.last_used = ""
+
+    def extract(self, image: np.ndarray, fast_threshold: int | None = None,
+                fallback_threshold: int | None = None, min_keypoints: int = 0,
+                noise_sigma: float | None = None):
+        if fallback_threshold is None:
+            sigma = image_noise_sigma(image) if noise_sigma is None else float(noise_sigma)
+            if sigma >= self.params.noisy_extractor_sigma:
+                self.last_used = "cells"
+                return self.cells.extract(image, fast_threshold, None, min_keypoints, noise_sigma=sigma)
+        self.last_used = "opencv"
+        return self.opencv.extract(image, fast_threshold, fallback_threshold, min_keypoints)
+
+
+def tracking_extractor(params: TrackingParams, responses: bool = True):
+    """The tracker's extractor: ``NoiseGatedExtractor`` when ``noisy_extractor_sigma`` > 0 and
+    ``extractor`` is opencv, else the one ``params.extractor`` names."""
+    if params.noisy_extractor_sigma > 0 and params.extractor == "opencv":
+        return NoiseGatedExtractor(params, responses)
+    return make_extractor(params, responses)

@@ -231,6 +231,13 @@ class TrackingParams:
     # the Gaussian's sigma in px (level-0 pixels); 0 = the guided self-filter of canopy.enhance.noise.
     subpixel_denoise_sigma: float = 0.0
     subpixel_denoise_blur: float = 2.0  # the best sum over KITTI's 4 noisy cells (two noise draws)
+    # Extractor by image noise (canopy.frontend.noisy_features.NoiseGatedExtractor), with
+    # extractor: opencv: an image whose noise sigma (track_health.image_noise_sigma) is at least
+    # noisy_extractor_sigma gets ORB-SLAM's per-cell extraction (the cells settings above, its
+    # fallback at cell_fallback_noise_factor x sigma) with noisy_extractor_n_features corners (0:
+    # n_features); other images keep cv2.ORB. 0: off.
+    noisy_extractor_sigma: float = 0.0
+    noisy_extractor_n_features: int = 0
 
     def disparity_offset_for(self, extractor: str) -> float:
         """The calibrated disparity offset for keypoints found by ``extractor`` (Features.extractor)."""
@@ -312,6 +319,8 @@ class TrackingParams:
         need(self.line_sigma > 0 and self.chi2_line > 0, "line_sigma", "and chi2_line must be > 0")
         need(self.line_max_depth_baselines > 0, "line_max_depth_baselines", "must be > 0")
         need(self.line_weight_in_count >= 0, "line_weight_in_count", "must be >= 0")
+        need(self.noisy_extractor_sigma >= 0, "noisy_extractor_sigma", "must be >= 0 (0: off)")
+        need(self.noisy_extractor_n_features >= 0, "noisy_extractor_n_features", "must be >= 0 (0: n_features)")
         return self
 
     def __post_init__(self):

@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from canopy.frontend.cell_extractor import make_extractor
+from canopy.frontend.noisy_features import tracking_extractor
 from canopy.frontend.features import Features
 from canopy.frontend.keyframe_policy import entropy_ratio, keyframe_reasons
 from canopy.frontend.geometry import (differential_entropy, pose_information, se3_inv, stereo_pose_jacobian,
@@ -71,9 +71,9 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
         # keypoints' responses (stereo matching, the map searches and the keyframes use positions,
         # octaves and descriptors), so the cells extractor skips its Harris responses (~3 ms per
         # KITTI image; its ranking "fast" does not need them)
-        self.extractor = make_extractor(self.params, responses=False)
+        self.extractor = tracking_extractor(self.params, responses=False)
         # cv2.ORB objects are not thread-safe: the right image gets its own extractor.
-        self.extractor_right = make_extractor(self.params, responses=False)
+        self.extractor_right = tracking_extractor(self.params, responses=False)
         self._pool = ThreadPoolExecutor(max_workers=1) if self.params.parallel_extraction else None
         # the right image's ORB and the stereo matching in that worker while this thread searches the
         # local map (canopy.frontend.tracker_worker); lines keep their own jobs in it, so not with lines
