@@ -137,9 +137,58 @@ class NoiseGatedExtractor:
         return self.opencv.extract(image, fast_threshold, fallback_threshold, min_keypoints)
 
 
+class NoiseGatedCellFallback:
+    """ORB-SLAM's per-cell extractor whose fallback factor depends on the image's robust noise sigma:
+    ``cell_fallback_noise_factor_noisy`` x sigma on images whose ``estimate_noise`` (rows_fraction
+    0.5, the sub-pixel refinement's estimator, ``refinement_pair``) is at least
+    ``cell_fallback_noisy_sigma``, ``cell_fallback_noise_factor`` on the others.
+
+    Why two estimators: the fallback floor itself is ``track_health.image_noise_sigma`` (the mean
+    |Laplacian difference|), which fine texture raises: clean KITTI measures 2-6 with it, so a 4 sigma
+    floor rises on clean frames too (clean KITTI 34.9 -> 39.6 mm, docs/notes/s11-noise.md). The
+    robust (median) Immerkær estimate barely sees texture: clean KITTI 1.7-2.0, the grid's low-noise
+    sensor 2.8-3.7, the noisy one 5.3-7.6 (docs/notes/s10-noise.md). So the robust sigma decides
+    *whether* the image is noisy, and the 4 sigma floor of ``image_noise_sigma`` (what the fallback
+    corners must stand above, s11-noise on EuRoC) is applied only then: a clean image gets exactly
+    the ungated extractor's features. Frames the enhancement changed (``fallback_threshold`` given)
+    go to the ungated extractor as before. Each image is judged by its own sigma.
+    """
+
+    def __init__(self, params: TrackingParams, responses: bool = True):
+        if params.extractor != "cells" or params.cell_fallback_noisy_sigma <= 0:
+            raise ValueError("NoiseGatedCellFallback: params.extractor must be 'cells' and "
+                             f"params.cell_fallback_noisy_sigma > 0 (got {params.extractor!r}, "
+                             f"{params.cell_fallback_noisy_sigma!r})")
+        self.params = params
+        self.clean = CellExtractor(params, responses)
+        self.noisy = CellExtractor(replace(params, cell_fallback_noise_factor=params.cell_fallback_noise_factor_noisy),
+                                   responses)
+        self.last_used = ""
+        self.last_robust_sigma: float | None = None
+
+    def extract(self, image: np.ndarray, fast_threshold: int | None = None,
+                fallback_threshold: int | None = None, min_keypoints: int = 0,
+                noise_sigma: float | None = None):
+        ext = self.clean
+        self.last_robust_sigma = None
+        if fallback_threshold is None:
+            img = np.asarray(image) if image is not None else None
+            if img is None or img.ndim != 2 or img.dtype != np.uint8 or img.size == 0:
+                raise ValueError("NoiseGatedCellFallback.extract: image must be a non-empty 2-D uint8 grey "
+                                 "image, got " + ("None" if img is None else f"shape {img.shape} dtype {img.dtype}"))
+            self.last_robust_sigma = estimate_noise(img, rows_fraction=0.5)
+            if self.last_robust_sigma >= self.params.cell_fallback_noisy_sigma:
+                ext = self.noisy
+        self.last_used = "noisy" if ext is self.noisy else "clean"
+        return ext.extract(image, fast_threshold, fallback_threshold, min_keypoints, noise_sigma=noise_sigma)
+
+
 def tracking_extractor(params: TrackingParams, responses: bool = True):
     """The tracker's extractor: ``NoiseGatedExtractor`` when ``noisy_extractor_sigma`` > 0 and
-    ``extractor`` is opencv, else the one ``params.extractor`` names."""
+    ``extractor`` is opencv, ``NoiseGatedCellFallback`` when ``cell_fallback_noisy_sigma`` > 0 and
+    ``extractor`` is cells, else the one ``params.extractor`` names."""
     if params.noisy_extractor_sigma > 0 and params.extractor == "opencv":
         return NoiseGatedExtractor(params, responses)
+    if params.cell_fallback_noisy_sigma > 0 and params.extractor == "cells":
+        return NoiseGatedCellFallback(params, responses)
     return make_extractor(params, responses)

@@ -238,6 +238,12 @@ class TrackingParams:
     # n_features); other images keep cv2.ORB. 0: off.
     noisy_extractor_sigma: float = 0.0
     noisy_extractor_n_features: int = 0
+    # With extractor: cells (canopy.frontend.noisy_features.NoiseGatedCellFallback): an image whose
+    # robust noise sigma (canopy.enhance.noise.estimate_noise, the refinement's estimator above) is at
+    # least cell_fallback_noisy_sigma gets the per-cell fallback at cell_fallback_noise_factor_noisy x
+    # sigma; other images keep cell_fallback_noise_factor. 0: off (every image the same factor).
+    cell_fallback_noisy_sigma: float = 0.0
+    cell_fallback_noise_factor_noisy: float = 4.0
 
     def disparity_offset_for(self, extractor: str) -> float:
         """The calibrated disparity offset for keypoints found by ``extractor`` (Features.extractor)."""
@@ -259,6 +265,8 @@ class TrackingParams:
         need(self.cell_ranking in ("harris2x", "fast", "harris"), "cell_ranking", "must be harris2x, fast or harris")
         need(0 < self.fast_fallback_threshold < 255, "fast_fallback_threshold", "must be in (0, 255)")
         need(self.cell_fallback_noise_factor >= 0, "cell_fallback_noise_factor", "must be >= 0")
+        need(self.cell_fallback_noisy_sigma >= 0, "cell_fallback_noisy_sigma", "must be >= 0 (0: off)")
+        need(self.cell_fallback_noise_factor_noisy >= 0, "cell_fallback_noise_factor_noisy", "must be >= 0")
         need(self.grid_cols > 0 and self.grid_rows > 0, "grid_cols", "and grid_rows must be > 0")
         need(self.oversample >= 1.0, "oversample", "must be >= 1")
         need(0 <= self.stereo_max_hamming <= 256, "stereo_max_hamming", "must be in [0, 256]")
