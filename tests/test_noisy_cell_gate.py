@@ -31,7 +31,12 @@ def with_noise(image: np.ndarray, sigma: float, seed: int) -> np.ndarray:
 
 def params() -> TrackingParams:
     return replace(TrackingParams(), extractor="cells", cell_fallback_noisy_sigma=2.5,
-                   cell_fallback_noise_factor_noisy=4.0)
+                   cell_fallback_noise_factor_noisy=4.0, cell_fallback_noisy_min_texture=1.35)
+
+
+def hazy(image: np.ndarray, t: float = 0.35, airlight: float = 220.0) -> np.ndarray:
+    """Koschmieder's model with one transmission for the whole image: the contrast falls by t."""
+    return np.clip(image * t + airlight * (1 - t), 0, 255).astype(np.uint8)
 
 
 def same(a, b) -> bool:
@@ -61,6 +66,10 @@ def test_gate_gives_the_ungated_features_on_clean_images_and_the_4_sigma_floor_o
     got = gate.extract(noisy)
     assert gate.last_used == "noisy" and same(got, four.extract(noisy))
     assert not same(got, plain.extract(noisy))        # the gate changes something on a noisy image
+    # the same noise on a hazy copy: the texture no longer stands above the noise, no 4 sigma floor
+    foggy = with_noise(hazy(left), 3.0, 1)
+    assert estimate_noise(foggy, rows_fraction=0.5) >= 2.5
+    assert same(gate.extract(foggy), plain.extract(foggy)) and gate.last_used == "clean"
     assert four.last_stats["fast_low"] >= 4 * image_noise_sigma(noisy)
     # a frame the enhancement changed (fallback threshold given) keeps the ungated path (cv2.ORB)
     assert same(gate.extract(noisy, 20, 7), plain.extract(noisy, 20, 7)) and gate.last_used == "clean"
@@ -72,6 +81,8 @@ def test_gate_off_is_the_plain_extractor_and_bad_input_is_refused(kitti_pair):
         replace(params(), cell_fallback_noisy_sigma=-1.0)
     with pytest.raises(ConfigError, match="cell_fallback_noise_factor_noisy"):
         replace(params(), cell_fallback_noise_factor_noisy=-1.0)
+    with pytest.raises(ConfigError, match="cell_fallback_noisy_min_texture"):
+        replace(params(), cell_fallback_noisy_min_texture=-1.0)
     with pytest.raises(ValueError, match="cell_fallback_noisy_sigma"):
         NoiseGatedCellFallback(replace(params(), cell_fallback_noisy_sigma=0.0))
     with pytest.raises(ValueError, match="image"):

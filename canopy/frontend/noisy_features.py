@@ -152,6 +152,14 @@ class NoiseGatedCellFallback:
     corners must stand above, s11-noise on EuRoC) is applied only then: a clean image gets exactly
     the ungated extractor's features. Frames the enhancement changed (``fallback_threshold`` given)
     go to the ungated extractor as before. Each image is judged by its own sigma.
+
+    Not on hazy images (``cell_fallback_noisy_min_texture``): with sigma 3-9 the 4 sigma floor is
+    above the FAST threshold itself, so the noisy images get no fallback corners at all; a hazy
+    image needs them in its washed-out far half. Haze lowers the texture toward the noise, so the
+    ratio of the two estimators (mean |Laplacian| / median, ~1 for pure noise) separates them on
+    KITTI: clean 3.0-3.5, low-noise sensor 2.05-2.36, noisy 1.45-1.61, haze 0.06 + either sensor
+    1.03-1.28 (KITTI grid cells, seeds 0 and 1). Without the test: haze 0.06 + noisy sensor 62.5 ->
+    202 mm, + low-noise 66.4 -> 88.2 mm (docs/notes/s11-noise.md).
     """
 
     def __init__(self, params: TrackingParams, responses: bool = True):
@@ -176,9 +184,12 @@ class NoiseGatedCellFallback:
             if img is None or img.ndim != 2 or img.dtype != np.uint8 or img.size == 0:
                 raise ValueError("NoiseGatedCellFallback.extract: image must be a non-empty 2-D uint8 grey "
                                  "image, got " + ("None" if img is None else f"shape {img.shape} dtype {img.dtype}"))
-            self.last_robust_sigma = estimate_noise(img, rows_fraction=0.5)
-            if self.last_robust_sigma >= self.params.cell_fallback_noisy_sigma:
-                ext = self.noisy
+            robust = self.last_robust_sigma = estimate_noise(img, rows_fraction=0.5)
+            if robust >= self.params.cell_fallback_noisy_sigma:
+                if noise_sigma is None:  # the fallback floor's sigma, measured once for both tests
+                    noise_sigma = image_noise_sigma(img)
+                if float(noise_sigma) >= self.params.cell_fallback_noisy_min_texture * robust:
+                    ext = self.noisy
         self.last_used = "noisy" if ext is self.noisy else "clean"
         return ext.extract(image, fast_threshold, fallback_threshold, min_keypoints, noise_sigma=noise_sigma)
 

@@ -242,8 +242,12 @@ class TrackingParams:
     # robust noise sigma (canopy.enhance.noise.estimate_noise, the refinement's estimator above) is at
     # least cell_fallback_noisy_sigma gets the per-cell fallback at cell_fallback_noise_factor_noisy x
     # sigma; other images keep cell_fallback_noise_factor. 0: off (every image the same factor).
+    # cell_fallback_noisy_min_texture: ... and only if the image's texture stands above its noise:
+    # track_health.image_noise_sigma (mean |Laplacian|, texture + noise) / the robust sigma (median,
+    # noise) at least this (haze lowers the texture toward the noise: ratio -> 1). 0: no texture test.
     cell_fallback_noisy_sigma: float = 0.0
     cell_fallback_noise_factor_noisy: float = 4.0
+    cell_fallback_noisy_min_texture: float = 0.0
 
     def disparity_offset_for(self, extractor: str) -> float:
         """The calibrated disparity offset for keypoints found by ``extractor`` (Features.extractor)."""
@@ -267,6 +271,7 @@ class TrackingParams:
         need(self.cell_fallback_noise_factor >= 0, "cell_fallback_noise_factor", "must be >= 0")
         need(self.cell_fallback_noisy_sigma >= 0, "cell_fallback_noisy_sigma", "must be >= 0 (0: off)")
         need(self.cell_fallback_noise_factor_noisy >= 0, "cell_fallback_noise_factor_noisy", "must be >= 0")
+        need(self.cell_fallback_noisy_min_texture >= 0, "cell_fallback_noisy_min_texture", "must be >= 0 (0: no test)")
         need(self.grid_cols > 0 and self.grid_rows > 0, "grid_cols", "and grid_rows must be > 0")
         need(self.oversample >= 1.0, "oversample", "must be >= 1")
         need(0 <= self.stereo_max_hamming <= 256, "stereo_max_hamming", "must be in [0, 256]")
