@@ -31,7 +31,7 @@ def with_noise(image: np.ndarray, sigma: float, seed: int) -> np.ndarray:
 
 def params() -> TrackingParams:
     return replace(TrackingParams(), extractor="cells", cell_fallback_noisy_sigma=2.5,
-                   cell_fallback_noise_factor_noisy=4.0, cell_fallback_noisy_min_texture=1.35)
+                   cell_fallback_noise_factor_noisy=4.0, cell_fallback_noisy_min_texture=2.15)
 
 
 def hazy(image: np.ndarray, t: float = 0.35, airlight: float = 220.0) -> np.ndarray:

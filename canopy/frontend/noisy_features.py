@@ -155,11 +155,14 @@ class NoiseGatedCellFallback:
 
     Not on hazy images (``cell_fallback_noisy_min_texture``): with sigma 3-9 the 4 sigma floor is
     above the FAST threshold itself, so the noisy images get no fallback corners at all; a hazy
-    image needs them in its washed-out far half. Haze lowers the texture toward the noise, so the
-    ratio of the two estimators (mean |Laplacian| / median, ~1 for pure noise) separates them on
-    KITTI: clean 3.0-3.5, low-noise sensor 2.05-2.36, noisy 1.45-1.61, haze 0.06 + either sensor
-    1.03-1.28 (KITTI grid cells, seeds 0 and 1). Without the test: haze 0.06 + noisy sensor 62.5 ->
-    202 mm, + low-noise 66.4 -> 88.2 mm (docs/notes/s11-noise.md).
+    image needs them in its washed-out far half. Haze flattens the texture, and the mean |Laplacian|
+    (``image_noise_sigma``) sees texture + noise where the median (the robust sigma) sees the noise,
+    so their difference, the texture excess in grey levels, separates them on KITTI (left and right
+    images, all frames): clean 3.4-4.5, low-noise sensor 3.0-4.1, noisy 2.4-3.5 (seeds 0-2), haze
+    0.03 + low-noise 1.3-1.9, haze 0.03 / 0.06 + either sensor 0.2-1.3 (seeds 0-1). Their ratio does
+    not (noisy 1.45-1.64, haze 0.03 + low-noise 1.36-1.55: the 1.35 ratio gate cost that cell
+    42.3 -> 55.7 mm). Without any test: haze 0.06 + noisy sensor 62.5 -> 202 mm, + low-noise 66.4 ->
+    88.2 mm (docs/notes/s11-noise.md).
     """
 
     def __init__(self, params: TrackingParams, responses: bool = True):
@@ -188,7 +191,7 @@ class NoiseGatedCellFallback:
             if robust >= self.params.cell_fallback_noisy_sigma:
                 if noise_sigma is None:  # the fallback floor's sigma, measured once for both tests
                     noise_sigma = image_noise_sigma(img)
-                if float(noise_sigma) >= self.params.cell_fallback_noisy_min_texture * robust:
+                if float(noise_sigma) - robust >= self.params.cell_fallback_noisy_min_texture:
                     ext = self.noisy
         self.last_used = "noisy" if ext is self.noisy else "clean"
         return ext.extract(image, fast_threshold, fallback_threshold, min_keypoints, noise_sigma=noise_sigma)

@@ -242,9 +242,9 @@ class TrackingParams:
     # robust noise sigma (canopy.enhance.noise.estimate_noise, the refinement's estimator above) is at
     # least cell_fallback_noisy_sigma gets the per-cell fallback at cell_fallback_noise_factor_noisy x
     # sigma; other images keep cell_fallback_noise_factor. 0: off (every image the same factor).
-    # cell_fallback_noisy_min_texture: ... and only if the image's texture stands above its noise:
-    # track_health.image_noise_sigma (mean |Laplacian|, texture + noise) / the robust sigma (median,
-    # noise) at least this (haze lowers the texture toward the noise: ratio -> 1). 0: no texture test.
+    # cell_fallback_noisy_min_texture: ... and only if the image has texture above its noise:
+    # track_health.image_noise_sigma (mean |Laplacian|, texture + noise) minus the robust sigma
+    # (median, noise) at least this many grey levels (haze flattens the texture). 0: no texture test.
     cell_fallback_noisy_sigma: float = 0.0
     cell_fallback_noise_factor_noisy: float = 4.0
     cell_fallback_noisy_min_texture: float = 0.0
