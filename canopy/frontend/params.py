@@ -76,16 +76,18 @@ class TrackingParams:
     stereo_matcher: str = "descriptor"
     # LK window (px, odd) and pyramid levels above level 0 (reach ~window/2 * 2^levels px); at most
     # flow_iterations Gauss-Newton steps per level (or a step < 0.03 px). VINS-Fusion tracks ~150
-    # points with 21x21, 3 levels, 30 steps; for 2000 KITTI keypoints that costs ~75 ms CPU, 11x11
-    # with 10 steps ~14 ms and lands as often within 3 px of the descriptor match (97 %): the SAD
+    # points with 21x21, 3 levels, 30 steps; for KITTI's 2000 keypoints that costs 70-95 ms CPU, 9x9
+    # with 10 steps 12-18 ms and lands as often within 3 px of the descriptor match (97 %): the SAD
     # refinement fixes the column from there (docs/notes/s11-speed.md)
     flow_window: int = 9
     flow_levels: int = 3
     flow_iterations: int = 10
     flow_max_dy: float = 1.0            # |v_right - v_left| allowed after the flow, px (rectified rows)
     # right->left back-track must return within flow_back_px (0: no back-track); it starts at the
-    # keypoint and runs on flow_back_levels pyramid levels (0: level 0 only, the cheap local check)
-    flow_back_px: float = 1.0
+    # keypoint and runs on flow_back_levels pyramid levels (0: level 0 only, the cheap local check).
+    # 1.0 px lost KITTI grid cells the descriptor matcher passes (15 % light, low-noise sensor ATE
+    # 0.039 -> 0.064 m; 6 % light + haze, noisy: 24 -> 12 % tracked), 0.5 px keeps them (0.032 m, 24 %)
+    flow_back_px: float = 0.5
     flow_back_levels: int = 0
     stereo_max_hamming: int = 75        # (TH_HIGH + TH_LOW) / 2 of ORB-SLAM2
     stereo_ratio: float = 0.8           # best / second-best Hamming distance
