@@ -77,10 +77,12 @@ def match_stereo_flow(left: Features, left_img: np.ndarray, right_img: np.ndarra
     scale_factors = params.scale_factor ** np.arange(params.n_levels)
     max_disp = params.max_disparity_fraction * calib.width
     uv = left.uv.astype(np.float64)
-    ur_flow, ok = flow_right_columns(left_img, right_img, uv, params, max_disp)
+    # the flow runs on the refinement's pair: on a noisy sensor (σ >= subpixel_denoise_sigma) both
+    # images smoothed alike, which LK's gradients need more than the SAD does; clean frames: raw
+    ref_left, ref_right, _ = refinement_pair(left_img, right_img, params)
+    ur_flow, ok = flow_right_columns(ref_left, ref_right, uv, params, max_disp)
     li = np.flatnonzero(ok)
     n_flow = len(li)
-    ref_left, ref_right, _ = refinement_pair(left_img, right_img, params)
     ur, sad, ok = subpixel_refine(ref_left, ref_right, uv[li], ur_flow[li], left.octave[li], scale_factors,
                                   params.subpixel_window, params.subpixel_search, params.subpixel_normalise)
     li, ur, sad = li[ok], ur[ok], sad[ok]
