@@ -83,6 +83,9 @@ class TrackingParams:
     flow_levels: int = 3
     flow_iterations: int = 10
     flow_max_dy: float = 1.0            # |v_right - v_left| allowed after the flow, px (rectified rows)
+    # LK drops a point whose window's gradient matrix has a smaller eigenvalue (per pixel, grey levels
+    # scaled to [0,1]) than this: ill-conditioned, textureless windows. OpenCV's default 1e-4.
+    flow_min_eig: float = 1e-4
     # right->left back-track must return within flow_back_px (0: no back-track); it starts at the
     # keypoint and runs on flow_back_levels pyramid levels (0: level 0 only, the cheap local check).
     # 1.0 px lost KITTI grid cells the descriptor matcher passes (15 % light, low-noise sensor ATE
@@ -281,6 +284,7 @@ class TrackingParams:
         need(self.flow_window >= 3 and self.flow_window % 2 == 1, "flow_window", "must be odd and >= 3")
         need(0 <= self.flow_levels <= 8, "flow_levels", "must be in [0, 8]")
         need(self.flow_iterations >= 1, "flow_iterations", "must be >= 1")
+        need(self.flow_min_eig > 0, "flow_min_eig", "must be > 0")
         need(self.flow_max_dy > 0, "flow_max_dy", "must be > 0")
         need(self.flow_back_px >= 0, "flow_back_px", "must be >= 0 (0: no back-track)")
         need(0 <= self.flow_back_levels <= 8, "flow_back_levels", "must be in [0, 8]")

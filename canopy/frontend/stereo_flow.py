@@ -47,7 +47,7 @@ def flow_right_columns(left_img: np.ndarray, right_img: np.ndarray, uv: np.ndarr
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, params.flow_iterations, 0.03)
     p0 = np.ascontiguousarray(uv, np.float32).reshape(-1, 1, 2)
     p1, st, _ = cv2.calcOpticalFlowPyrLK(left_img, right_img, p0, None, winSize=win,
-                                         maxLevel=params.flow_levels, criteria=criteria)
+                                         maxLevel=params.flow_levels, criteria=criteria, minEigThreshold=params.flow_min_eig)
     p1 = p1.reshape(-1, 2)
     ok = st.reshape(-1) == 1
     disp = uv[:, 0] - p1[:, 0]
@@ -59,7 +59,7 @@ def flow_right_columns(left_img: np.ndarray, right_img: np.ndarray, uv: np.ndarr
         q1 = np.ascontiguousarray(p1[idx], np.float32).reshape(-1, 1, 2)
         q0 = p0[idx].copy()
         back, st_b, _ = cv2.calcOpticalFlowPyrLK(right_img, left_img, q1, q0, winSize=win,
-                                                 maxLevel=params.flow_back_levels, criteria=criteria,
+                                                 maxLevel=params.flow_back_levels, criteria=criteria, minEigThreshold=params.flow_min_eig,
                                                  flags=cv2.OPTFLOW_USE_INITIAL_FLOW)
         err = np.linalg.norm(back.reshape(-1, 2) - uv[idx], axis=1)
         ok[idx] = (st_b.reshape(-1) == 1) & (err <= params.flow_back_px)
