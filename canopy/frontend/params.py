@@ -88,8 +88,8 @@ class TrackingParams:
     flow_min_eig: float = 1e-4
     # right->left back-track must return within flow_back_px (0: no back-track); it starts at the
     # keypoint and runs on flow_back_levels pyramid levels (0: level 0 only, the cheap local check).
-    # 1.0 px lost KITTI grid cells the descriptor matcher passes (15 % light, low-noise sensor ATE
-    # 0.039 -> 0.064 m; 6 % light + haze, noisy: 24 -> 12 % tracked), 0.5 px keeps them (0.032 m, 24 %)
+    # Neither 1.0 nor 0.5 px keeps every KITTI grid check the descriptor matcher passes (each loses
+    # two different cells; docs/notes/s11-speed.md): the flow matcher is not a default anywhere.
     flow_back_px: float = 0.5
     flow_back_levels: int = 0
     stereo_max_hamming: int = 75        # (TH_HIGH + TH_LOW) / 2 of ORB-SLAM2
