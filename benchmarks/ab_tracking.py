@@ -36,7 +36,7 @@ ROOT = Path(__file__).resolve().parents[1]
 STAGES = ("orb", "orb_right", "stereo_worker", "match_motion", "pnp", "track_local_map", "keyframe", "stereo")
 
 
-def child(dataset: str) -> None:
+def child(dataset: str, settings: list[str]) -> None:
     """One side: read "go" lines from stdin, process the next frame, answer one JSON line."""
     import cv2
 
@@ -49,6 +49,18 @@ def child(dataset: str) -> None:
 
     cfg = load_run_config(dataset)
     tp, rt = cfg.tracking, cfg.runtime
+    if settings:  # --set tracking.FIELD=VALUE (this side only)
+        import dataclasses
+
+        import yaml
+        sets = {}
+        for item in settings:
+            key, value = item.split("=", 1)
+            section, field = key.split(".", 1)
+            if section != "tracking" or not hasattr(tp, field):
+                raise SystemExit(f"ab_tracking: --set {item}: only tracking.FIELD=VALUE of TrackingParams")
+            sets[field] = yaml.safe_load(value)
+        tp = dataclasses.replace(tp, **sets).validate()
     n_cv = int(getattr(tp, "opencv_threads", 0))
     if n_cv > 0:  # as the tracking actor sets its process
         cv2.setNumThreads(n_cv)
@@ -96,10 +108,13 @@ def main() -> int:
     ap.add_argument("--dataset", default="kitti")
     ap.add_argument("--reps", type=int, default=1)
     ap.add_argument("--out", type=Path, default=None, help="JSON of every frame's figures")
+    ap.add_argument("--set", dest="settings", action="append", default=[], metavar="tracking.FIELD=VALUE",
+                    help="override a tracking setting on this checkout's side only (repeatable), e.g. "
+                         "--set tracking.stereo_matcher=flow against --base of the same commit")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args()
     if a.child:
-        child(a.dataset)
+        child(a.dataset, a.settings)
         return 0
     if a.base is None or not (a.base / "canopy").is_dir():
         raise SystemExit("ab_tracking: --base must be a checkout (a folder with canopy/)")
@@ -107,8 +122,9 @@ def main() -> int:
     procs = {}
     for name, root in sides.items():
         env = dict(os.environ, PYTHONPATH=str(root))
+        extra = [f"--set={item}" for item in a.settings] if name == "this" else []
         procs[name] = subprocess.Popen([sys.executable, str(ROOT / "benchmarks" / "ab_tracking.py"), "--child",
-                                        "--dataset", a.dataset], cwd=root, env=env, text=True,
+                                        "--dataset", a.dataset, *extra], cwd=root, env=env, text=True,
                                        stdin=subprocess.PIPE, stdout=subprocess.PIPE)
     n = {name: json.loads(p.stdout.readline())["frames"] for name, p in procs.items()}
     if len(set(n.values())) != 1:

@@ -68,6 +68,30 @@ class TrackingParams:
     cell_ranking: str = "fast"
 
     # --- stereo matching on rectified rows (AGRI §3.2.2; ORB-SLAM2 ComputeStereoMatches)
+    # How each left keypoint's right-image column is found: "descriptor" (the right image's ORB, row
+    # band search, Hamming ratio test; canopy.frontend.stereo) or "flow" (pyramidal Lucas-Kanade from
+    # the left keypoints into the right image with a row / disparity / back-track check, no right ORB;
+    # canopy.frontend.stereo_flow, as VINS-Fusion's stereo tracking). Both end in the same SAD
+    # sub-pixel refinement and SAD outlier test.
+    stereo_matcher: str = "descriptor"
+    # LK window (px, odd) and pyramid levels above level 0 (reach ~window/2 * 2^levels px); at most
+    # flow_iterations Gauss-Newton steps per level (or a step < 0.03 px). VINS-Fusion tracks ~150
+    # points with 21x21, 3 levels, 30 steps; for KITTI's 2000 keypoints that costs 70-95 ms CPU, 9x9
+    # with 10 steps 12-18 ms and lands as often within 3 px of the descriptor match (97 %): the SAD
+    # refinement fixes the column from there (docs/notes/s11-speed.md)
+    flow_window: int = 9
+    flow_levels: int = 3
+    flow_iterations: int = 10
+    flow_max_dy: float = 1.0            # |v_right - v_left| allowed after the flow, px (rectified rows)
+    # LK drops a point whose window's gradient matrix has a smaller eigenvalue (per pixel, grey levels
+    # scaled to [0,1]) than this: ill-conditioned, textureless windows. OpenCV's default 1e-4.
+    flow_min_eig: float = 1e-4
+    # right->left back-track must return within flow_back_px (0: no back-track); it starts at the
+    # keypoint and runs on flow_back_levels pyramid levels (0: level 0 only, the cheap local check).
+    # Neither 1.0 nor 0.5 px keeps every KITTI grid check the descriptor matcher passes (each loses
+    # two different cells; docs/notes/s11-speed.md): the flow matcher is not a default anywhere.
+    flow_back_px: float = 0.5
+    flow_back_levels: int = 0
     stereo_max_hamming: int = 75        # (TH_HIGH + TH_LOW) / 2 of ORB-SLAM2
     stereo_ratio: float = 0.8           # best / second-best Hamming distance
     min_disparity: float = 0.5          # px; farther points carry no depth
@@ -276,6 +300,14 @@ class TrackingParams:
         need(self.oversample >= 1.0, "oversample", "must be >= 1")
         need(0 <= self.stereo_max_hamming <= 256, "stereo_max_hamming", "must be in [0, 256]")
         need(0 < self.stereo_ratio <= 1, "stereo_ratio", "must be in (0, 1]")
+        need(self.stereo_matcher in ("descriptor", "flow"), "stereo_matcher", "must be 'descriptor' or 'flow'")
+        need(self.flow_window >= 3 and self.flow_window % 2 == 1, "flow_window", "must be odd and >= 3")
+        need(0 <= self.flow_levels <= 8, "flow_levels", "must be in [0, 8]")
+        need(self.flow_iterations >= 1, "flow_iterations", "must be >= 1")
+        need(self.flow_min_eig > 0, "flow_min_eig", "must be > 0")
+        need(self.flow_max_dy > 0, "flow_max_dy", "must be > 0")
+        need(self.flow_back_px >= 0, "flow_back_px", "must be >= 0 (0: no back-track)")
+        need(0 <= self.flow_back_levels <= 8, "flow_back_levels", "must be in [0, 8]")
         need(self.min_disparity > 0, "min_disparity", "must be > 0")
         need(0 < self.max_disparity_fraction <= 1, "max_disparity_fraction", "must be in (0, 1]")
         need(self.row_tolerance >= 0, "row_tolerance", "must be >= 0")

@@ -190,11 +190,16 @@ def stereo_candidates(left: Features, right: Features, tol: np.ndarray, octave_t
     return needle // len(levels), by_level[pos], row_rank
 
 
-def match_stereo(left: Features, right: Features, left_img: np.ndarray, right_img: np.ndarray,
+def match_stereo(left: Features, right: Features | None, left_img: np.ndarray, right_img: np.ndarray,
                  calib: StereoCalibration, params: TrackingParams,
                  noise_sigma: float | None = None) -> StereoMatches:
     """``noise_sigma``: the left image's noise (track_health.image_noise_sigma); with it the SAD
-    outlier test is stricter on low-SNR (hazy, noisy) frames (canopy.frontend.noisy_features)."""
+    outlier test is stricter on low-SNR (hazy, noisy) frames (canopy.frontend.noisy_features).
+    With ``stereo_matcher: flow`` the right columns come from LK flow (canopy.frontend.stereo_flow)
+    and ``right`` is not used (may be None)."""
+    if params.stereo_matcher == "flow":
+        from canopy.frontend.stereo_flow import match_stereo_flow  # imports this module
+        return match_stereo_flow(left, left_img, right_img, calib, params, noise_sigma)
     n = len(left)
     u_right = np.full(n, -1.0, np.float32)
     depth = np.full(n, -1.0, np.float32)

@@ -37,7 +37,7 @@ def record_stage(timings: dict, name: str, t0: tuple[float, float]) -> None:
     timings[name + "_cpu"] = (time.thread_time() - t0[1]) * 1e3
 
 
-def frame_stereo(left: Features, right: Features, frame: StereoFrame, calib: StereoCalibration,
+def frame_stereo(left: Features, right: Features | None, frame: StereoFrame, calib: StereoCalibration,
                  params: TrackingParams, scale_factors: np.ndarray,
                  noise_sigma: float | None) -> StereoMatches:
     """Stereo matches of one frame for the left features as OpenCV reports them; with
@@ -70,7 +70,8 @@ class StereoJob:
 
     def _run(self, extractor, frame, calib, params, scale_factors, noise_sigma, fast) -> StereoMatches:
         t0 = stage_clock()
-        right = extractor.extract(frame.right, *fast)
+        # the flow matcher needs no right keypoints (canopy.frontend.stereo_flow)
+        right = None if params.stereo_matcher == "flow" else extractor.extract(frame.right, *fast)
         record_stage(self.timings, "orb_right", t0)
         left = self._left.result()
         t0 = stage_clock()
@@ -105,12 +106,16 @@ class TrackerFeaturesMixin:
                 left = centre_keypoints(left, None, self.scale_factors, self.calib.width, self.calib.height)[0]
             record_stage(timings, "orb", t0)
             return left, job, None
-        if self._pool is not None:
+        flow = self.params.stereo_matcher == "flow"  # no right keypoints (canopy.frontend.stereo_flow)
+        if self._pool is not None and not flow:
             right_job = self._pool.submit(self.extractor_right.extract, frame.right, *fast)
         line_job = self._submit_line_jobs(frame) if self._lines_on else None
         # the tracker's noise sigma is of frame.left: the cell extractor's fallback floor reuses it
         left = self.extractor.extract(frame.left, *fast, noise_sigma=noise_sigma)
-        right = right_job.result() if self._pool is not None else self.extractor_right.extract(frame.right, *fast)
+        if flow:
+            right = None
+        else:
+            right = right_job.result() if self._pool is not None else self.extractor_right.extract(frame.right, *fast)
         record_stage(timings, "orb", t0)
         t0 = stage_clock()
         stereo = frame_stereo(left, right, frame, self.calib, self.params, self.scale_factors, noise_sigma)
