@@ -40,6 +40,14 @@ class ContourParams:
     max_disparity_px: float = 64.0  # level-0 px; block matching searches up to this (rounded up to 16s)
     block_size: int = 7             # StereoBM window at the downscaled resolution (odd, >= 5)
     octave_scaled: bool = False     # window_px times scale^octave for pyramid-level keypoints
+    # Frame gate: the test's "unmatched = background" rule only holds where block matching works.
+    # On dark or noisy enhanced frames StereoBM's uniqueness / texture checks reject most of the
+    # image (haze-row at 6 % light: 45 % of it matched, 83 % of the stereo keypoints flagged, 71 %
+    # for "unmatched near"; docs/notes/s11-drift.md), so the frame's flags say nothing about
+    # silhouettes. Below this matched fraction of the searchable image no keypoint is flagged.
+    min_matched_fraction: float = 0.0
+    # Nor when more than this fraction of the tested keypoints would be flagged (1: no cap).
+    max_flagged_fraction: float = 1.0
 
     def validate(self) -> "ContourParams":
         def need(ok: bool, name: str, what: str) -> None:
@@ -51,13 +59,17 @@ class ContourParams:
         need(self.downscale in (1, 2, 4), "downscale", "must be 1, 2 or 4")
         need(self.max_disparity_px > 0, "max_disparity_px", "must be > 0")
         need(self.block_size >= 5 and self.block_size % 2 == 1, "block_size", "must be odd and >= 5")
+        need(0.0 <= self.min_matched_fraction <= 1.0, "min_matched_fraction", "must be in [0, 1]")
+        need(0.0 < self.max_flagged_fraction <= 1.0, "max_flagged_fraction", "must be in (0, 1]")
         return self
 
     @classmethod
     def from_tracking(cls, p) -> "ContourParams":
         """The ``tracking.contour_*`` settings of a ``TrackingParams``."""
         return cls(window_px=p.contour_window_px, ratio=p.contour_ratio, downscale=p.contour_downscale,
-                   max_disparity_px=p.contour_max_disparity_px, octave_scaled=p.contour_octave_scaled)
+                   max_disparity_px=p.contour_max_disparity_px, octave_scaled=p.contour_octave_scaled,
+                   min_matched_fraction=p.contour_min_matched_fraction,
+                   max_flagged_fraction=p.contour_max_flagged_fraction)
 
 
 class SilhouetteDetector:
@@ -137,4 +149,20 @@ class SilhouetteDetector:
     def __call__(self, left: np.ndarray, right: np.ndarray, uv: np.ndarray, octave: np.ndarray | None = None,
                  scale_factor: float = 1.2) -> np.ndarray:
         d, first = self.disparity(left, right)
-        return self.flags(d, first, uv, octave, scale_factor)
+        if not self.reliable(d, first):
+            return np.zeros(len(uv), bool)
+        on = self.flags(d, first, uv, octave, scale_factor)
+        if len(on) and on.mean() > self.params.max_flagged_fraction:
+            return np.zeros(len(uv), bool)
+        return on
+
+    @staticmethod
+    def matched_fraction(disparity: np.ndarray, first_col: int) -> float:
+        """Fraction of the searchable image (right of ``first_col``) block matching matched."""
+        searchable = disparity[:, first_col:]
+        return float((searchable > _BM_INVALID).mean()) if searchable.size else 0.0
+
+    def reliable(self, disparity: np.ndarray, first_col: int) -> bool:
+        """Whether this frame's dense disparity is evidence at all (``min_matched_fraction``)."""
+        p = self.params
+        return p.min_matched_fraction <= 0.0 or self.matched_fraction(disparity, first_col) >= p.min_matched_fraction
