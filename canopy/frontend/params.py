@@ -151,6 +151,8 @@ class TrackingParams:
     # more than contour_max_flagged_fraction of its stereo points would be. 0 / 1: no gate.
     contour_min_matched_fraction: float = 0.0
     contour_max_flagged_fraction: float = 1.0
+    # False: only disparity steps flag a keypoint, not "no StereoBM match near it" (ContourParams)
+    contour_unmatched_is_contour: bool = True
     # Contour points still make landmarks (placed at their stereo depth, observed bearing-only in
     # tracking and BA): without them the far crowns / sky rims that pin the heading leave the map
     # (docs/notes/s7-drift.md). False: contour points make no landmark (s6's rule).

@@ -46,6 +46,9 @@ class ContourParams:
     # for "unmatched near"; docs/notes/s11-drift.md), so the frame's flags say nothing about
     # silhouettes. Below this matched fraction of the searchable image no keypoint is flagged.
     min_matched_fraction: float = 0.0
+    # False: a keypoint with no block-matching disparity near it is not flagged (only disparity steps
+    # are contours); True: unmatched counts as background (the rule above).
+    unmatched_is_contour: bool = True
     # Nor when more than this fraction of the tested keypoints would be flagged (1: no cap).
     max_flagged_fraction: float = 1.0
 
@@ -69,7 +72,8 @@ class ContourParams:
         return cls(window_px=p.contour_window_px, ratio=p.contour_ratio, downscale=p.contour_downscale,
                    max_disparity_px=p.contour_max_disparity_px, octave_scaled=p.contour_octave_scaled,
                    min_matched_fraction=p.contour_min_matched_fraction,
-                   max_flagged_fraction=p.contour_max_flagged_fraction)
+                   max_flagged_fraction=p.contour_max_flagged_fraction,
+                   unmatched_is_contour=p.contour_unmatched_is_contour)
 
 
 class SilhouetteDetector:
@@ -140,7 +144,10 @@ class SilhouetteDetector:
             dmax, dmin = self._min_max(disparity, rad)
             hi[sel], lo[sel] = dmax[y[sel], x[sel]], dmin[y[sel], x[sel]]
         # unmatched anywhere near (lo == 0: background or occluded) or a disparity step > ratio
-        step = (lo <= _BM_INVALID) | (hi > (1.0 + self.params.ratio) * lo)
+        unmatched = lo <= _BM_INVALID
+        step = (hi > (1.0 + self.params.ratio) * lo) & ~unmatched
+        if self.params.unmatched_is_contour:
+            step |= unmatched
         # left of first_col block matching cannot match at all: no evidence either way
         judged = x - r >= first_col
         out[:] = step & judged
