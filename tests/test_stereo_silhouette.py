@@ -149,6 +149,12 @@ def test_flagged_fraction_cap_and_unmatched_switch():
     assert det.flags(disp, 0, pts).tolist() == [True, False]
     no_unm = SilhouetteDetector(ContourParams(unmatched_is_contour=False))
     assert no_unm.flags(disp, 0, pts).tolist() == [False, False]
+    # unmatched_min_radius: a wide hole (sky) still counts, a 2 px one (a low-texture patch) does not
+    disp[58:60, 148:150] = 0.0
+    pts = np.array([[2 * 220.0, 2 * 120.0], [2 * 149.0, 2 * 59.0]])
+    assert det.flags(disp, 0, pts).tolist() == [True, True]
+    wide = SilhouetteDetector(ContourParams(unmatched_min_radius=4))
+    assert wide.flags(disp, 0, pts).tolist() == [True, False]
     with pytest.raises(ConfigError, match="contour_min_matched_fraction"):
         TrackingParams(contour_min_matched_fraction=1.5)
     with pytest.raises(ConfigError, match="contour_max_flagged_fraction"):

@@ -49,6 +49,10 @@ class ContourParams:
     # False: a keypoint with no block-matching disparity near it is not flagged (only disparity steps
     # are contours); True: unmatched counts as background (the rule above).
     unmatched_is_contour: bool = True
+    # > 0 (with unmatched_is_contour): only unmatched regions that survive a morphological opening
+    # with a disc of this radius (downscaled px; sky, wide occlusions) count as background; smaller
+    # holes (block matching failing on a low-texture patch of a row's foliage) do not.
+    unmatched_min_radius: int = 0
     # Nor when more than this fraction of the tested keypoints would be flagged (1: no cap).
     max_flagged_fraction: float = 1.0
 
@@ -63,6 +67,7 @@ class ContourParams:
         need(self.max_disparity_px > 0, "max_disparity_px", "must be > 0")
         need(self.block_size >= 5 and self.block_size % 2 == 1, "block_size", "must be odd and >= 5")
         need(0.0 <= self.min_matched_fraction <= 1.0, "min_matched_fraction", "must be in [0, 1]")
+        need(self.unmatched_min_radius >= 0, "unmatched_min_radius", "must be >= 0")
         need(0.0 < self.max_flagged_fraction <= 1.0, "max_flagged_fraction", "must be in (0, 1]")
         return self
 
@@ -73,7 +78,8 @@ class ContourParams:
                    max_disparity_px=p.contour_max_disparity_px, octave_scaled=p.contour_octave_scaled,
                    min_matched_fraction=p.contour_min_matched_fraction,
                    max_flagged_fraction=p.contour_max_flagged_fraction,
-                   unmatched_is_contour=p.contour_unmatched_is_contour)
+                   unmatched_is_contour=p.contour_unmatched_is_contour,
+                   unmatched_min_radius=p.contour_unmatched_min_radius)
 
 
 class SilhouetteDetector:
@@ -116,6 +122,20 @@ class SilhouetteDetector:
             k = self._kernels[r] = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
         return cv2.dilate(disparity, k), cv2.erode(disparity, k)
 
+    def _near_wide_unmatched(self, disparity: np.ndarray, x: np.ndarray, y: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """True where an unmatched region at least ``unmatched_min_radius`` wide lies within the
+        keypoint's neighbourhood (radius ``r``)."""
+        k = self.params.unmatched_min_radius
+        hole = (disparity <= _BM_INVALID).astype(np.uint8)
+        disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * k + 1, 2 * k + 1))
+        wide = cv2.morphologyEx(hole, cv2.MORPH_OPEN, disc)
+        out = np.zeros(len(x), bool)
+        for rad in np.unique(r).tolist():
+            sel = r == rad
+            near = cv2.dilate(wide, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * rad + 1, 2 * rad + 1)))
+            out[sel] = near[y[sel], x[sel]] > 0
+        return out
+
     def radii(self, octave: np.ndarray | None, scale_factor: float) -> np.ndarray:
         """Neighbourhood radius per keypoint in downscaled px: ``window_px`` at level 0, times
         scale_factor^octave when ``octave_scaled`` (the SAD window and the ORB patch of a level-L
@@ -147,7 +167,8 @@ class SilhouetteDetector:
         unmatched = lo <= _BM_INVALID
         step = (hi > (1.0 + self.params.ratio) * lo) & ~unmatched
         if self.params.unmatched_is_contour:
-            step |= unmatched
+            step |= unmatched if self.params.unmatched_min_radius <= 0 else \
+                self._near_wide_unmatched(disparity, x, y, r)
         # left of first_col block matching cannot match at all: no evidence either way
         judged = x - r >= first_col
         out[:] = step & judged
