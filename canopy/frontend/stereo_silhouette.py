@@ -53,7 +53,8 @@ class ContourParams:
     # with a disc of this radius (downscaled px; sky, wide occlusions) count as background; smaller
     # holes (block matching failing on a low-texture patch of a row's foliage) do not.
     unmatched_min_radius: int = 0
-    # Nor when more than this fraction of the tested keypoints would be flagged (1: no cap).
+    # Frame cap: no keypoint is flagged either when more than this fraction of the tested
+    # keypoints would be (1: no cap; the rows flag 22-58 % per frame, so no cap was used).
     max_flagged_fraction: float = 1.0
 
     def validate(self) -> "ContourParams":
