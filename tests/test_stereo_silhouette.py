@@ -104,6 +104,63 @@ def test_bad_contour_settings_are_named():
                                             np.zeros((1, 2)))
 
 
+def _noisy(img, sigma, seed):
+    """The image under strong sensor noise (a dark frame after enhancement: sigma ~25 grey levels)."""
+    rng = np.random.default_rng(seed)
+    return np.clip(img.astype(np.float32) + rng.normal(0.0, sigma, img.shape), 0, 255).astype(np.uint8)
+
+
+def test_frame_gate_leaves_frames_alone_where_block_matching_fails():
+    # on noise block matching rejects much of the image, and "unmatched = background" then flags
+    # points on flat surfaces; the gate (min_matched_fraction) flags nothing on such a frame and
+    # changes nothing on the clean one
+    _, left, right, _ = _scene()
+    edge_u = CALIB.cx + CALIB.fx * BOARD_EDGE_X / BOARD_Z
+    rows = np.linspace(60, 420, 30)
+    uv = np.concatenate([np.stack([np.full(len(rows), edge_u - 60), rows], 1),     # board
+                         np.stack([np.full(len(rows), edge_u + 60), rows], 1)])    # wall
+    det, gated = SilhouetteDetector(ContourParams()), SilhouetteDetector(ContourParams(min_matched_fraction=0.6))
+    d, first = det.disparity(left, right)
+    assert det.matched_fraction(d, first) >= 0.8
+    assert (gated(left, right, uv) == det(left, right, uv)).all()
+    nl, nr = _noisy(left, 60, 1), _noisy(right, 60, 2)
+    d, first = det.disparity(nl, nr)
+    assert det.matched_fraction(d, first) < 0.6
+    assert det(nl, nr, uv).mean() > 0.3          # ungated: flat-surface points flagged
+    assert not gated(nl, nr, uv).any()
+
+
+def test_flagged_fraction_cap_and_unmatched_switch():
+    _, left, right, _ = _scene()
+    edge_u = CALIB.cx + CALIB.fx * BOARD_EDGE_X / BOARD_Z
+    rows = CALIB.cy + CALIB.fy * (np.array([-1.125, -0.625, -0.125, 0.375, 0.875]) / BOARD_Z)
+    on_edge = np.stack([np.full(len(rows), edge_u), rows], axis=1)
+    flat = np.stack([np.full(len(rows), edge_u - 60), rows], axis=1)
+    det = SilhouetteDetector(ContourParams())
+    assert det(left, right, on_edge).all()
+    # every tested point flagged: over a cap of 0.9 the frame's flags are not believed
+    assert not SilhouetteDetector(ContourParams(max_flagged_fraction=0.9))(left, right, on_edge).any()
+    uv = np.concatenate([on_edge, flat])
+    assert (SilhouetteDetector(ContourParams(max_flagged_fraction=0.9))(left, right, uv) == det(left, right, uv)).all()
+    # a disparity map with a hole: unmatched flags it only with unmatched_is_contour
+    disp = np.full((240, 376), 20.0, np.float32)
+    disp[100:140, 200:240] = 0.0
+    pts = np.array([[2 * 220.0, 2 * 120.0], [2 * 300.0, 2 * 60.0]])
+    assert det.flags(disp, 0, pts).tolist() == [True, False]
+    no_unm = SilhouetteDetector(ContourParams(unmatched_is_contour=False))
+    assert no_unm.flags(disp, 0, pts).tolist() == [False, False]
+    # unmatched_min_radius: a wide hole (sky) still counts, a 2 px one (a low-texture patch) does not
+    disp[58:60, 148:150] = 0.0
+    pts = np.array([[2 * 220.0, 2 * 120.0], [2 * 149.0, 2 * 59.0]])
+    assert det.flags(disp, 0, pts).tolist() == [True, True]
+    wide = SilhouetteDetector(ContourParams(unmatched_min_radius=4))
+    assert wide.flags(disp, 0, pts).tolist() == [True, False]
+    with pytest.raises(ConfigError, match="contour_min_matched_fraction"):
+        TrackingParams(contour_min_matched_fraction=1.5)
+    with pytest.raises(ConfigError, match="contour_max_flagged_fraction"):
+        TrackingParams(contour_max_flagged_fraction=0.0)
+
+
 def _track(params: TrackingParams, n: int = 8):
     (tex_b, tex_w), *_ = _scene()
     poses = [se3_exp(np.array([0.01 * i, 0.005 * i, 0.03 * i, 0.0, 0.01 * i, 0.0])) for i in range(n)]

@@ -170,6 +170,15 @@ class TrackingParams:
     contour_downscale: int = 2
     contour_max_disparity_px: float = 64.0
     contour_octave_scaled: bool = False  # window times scale_factor^octave (a level's SAD window)
+    # Frame gate (canopy.frontend.stereo_silhouette.ContourParams): no keypoint of a frame is flagged
+    # when StereoBM matched less than this fraction of it (dark / noisy enhanced frames), or when
+    # more than contour_max_flagged_fraction of its stereo points would be. 0 / 1: no gate.
+    contour_min_matched_fraction: float = 0.0
+    contour_max_flagged_fraction: float = 1.0
+    # False: only disparity steps flag a keypoint, not "no StereoBM match near it" (ContourParams)
+    contour_unmatched_is_contour: bool = True
+    # > 0: only unmatched regions surviving an opening of this radius (downscaled px) count (ContourParams)
+    contour_unmatched_min_radius: int = 0
     # Contour points still make landmarks (placed at their stereo depth, observed bearing-only in
     # tracking and BA): without them the far crowns / sky rims that pin the heading leave the map
     # (docs/notes/s7-drift.md). False: contour points make no landmark (s6's rule).
@@ -332,6 +341,9 @@ class TrackingParams:
         need(self.contour_ratio > 0, "contour_ratio", "must be > 0")
         need(self.contour_downscale in (1, 2, 4), "contour_downscale", "must be 1, 2 or 4")
         need(self.contour_max_disparity_px > 0, "contour_max_disparity_px", "must be > 0")
+        need(0.0 <= self.contour_min_matched_fraction <= 1.0, "contour_min_matched_fraction", "must be in [0, 1]")
+        need(self.contour_unmatched_min_radius >= 0, "contour_unmatched_min_radius", "must be >= 0")
+        need(0.0 < self.contour_max_flagged_fraction <= 1.0, "contour_max_flagged_fraction", "must be in (0, 1]")
         need(self.pnp_reprojection_error > 0, "pnp_reprojection_error", "must be > 0")
         need(self.pnp_iterations > 0, "pnp_iterations", "must be > 0")
         need(0 < self.pnp_confidence < 1, "pnp_confidence", "must be in (0, 1)")

@@ -40,6 +40,22 @@ class ContourParams:
     max_disparity_px: float = 64.0  # level-0 px; block matching searches up to this (rounded up to 16s)
     block_size: int = 7             # StereoBM window at the downscaled resolution (odd, >= 5)
     octave_scaled: bool = False     # window_px times scale^octave for pyramid-level keypoints
+    # Frame gate: the test's "unmatched = background" rule only holds where block matching works.
+    # On dark or noisy enhanced frames StereoBM's uniqueness / texture checks reject most of the
+    # image (haze-row at 6 % light: 45 % of it matched, 83 % of the stereo keypoints flagged, 71 %
+    # for "unmatched near"; docs/notes/s11-drift.md), so the frame's flags say nothing about
+    # silhouettes. Below this matched fraction of the searchable image no keypoint is flagged.
+    min_matched_fraction: float = 0.0
+    # False: a keypoint with no block-matching disparity near it is not flagged (only disparity steps
+    # are contours); True: unmatched counts as background (the rule above).
+    unmatched_is_contour: bool = True
+    # > 0 (with unmatched_is_contour): only unmatched regions that survive a morphological opening
+    # with a disc of this radius (downscaled px; sky, wide occlusions) count as background; smaller
+    # holes (block matching failing on a low-texture patch of a row's foliage) do not.
+    unmatched_min_radius: int = 0
+    # Frame cap: no keypoint is flagged either when more than this fraction of the tested
+    # keypoints would be (1: no cap; the rows flag 22-58 % per frame, so no cap was used).
+    max_flagged_fraction: float = 1.0
 
     def validate(self) -> "ContourParams":
         def need(ok: bool, name: str, what: str) -> None:
@@ -51,13 +67,20 @@ class ContourParams:
         need(self.downscale in (1, 2, 4), "downscale", "must be 1, 2 or 4")
         need(self.max_disparity_px > 0, "max_disparity_px", "must be > 0")
         need(self.block_size >= 5 and self.block_size % 2 == 1, "block_size", "must be odd and >= 5")
+        need(0.0 <= self.min_matched_fraction <= 1.0, "min_matched_fraction", "must be in [0, 1]")
+        need(self.unmatched_min_radius >= 0, "unmatched_min_radius", "must be >= 0")
+        need(0.0 < self.max_flagged_fraction <= 1.0, "max_flagged_fraction", "must be in (0, 1]")
         return self
 
     @classmethod
     def from_tracking(cls, p) -> "ContourParams":
         """The ``tracking.contour_*`` settings of a ``TrackingParams``."""
         return cls(window_px=p.contour_window_px, ratio=p.contour_ratio, downscale=p.contour_downscale,
-                   max_disparity_px=p.contour_max_disparity_px, octave_scaled=p.contour_octave_scaled)
+                   max_disparity_px=p.contour_max_disparity_px, octave_scaled=p.contour_octave_scaled,
+                   min_matched_fraction=p.contour_min_matched_fraction,
+                   max_flagged_fraction=p.contour_max_flagged_fraction,
+                   unmatched_is_contour=p.contour_unmatched_is_contour,
+                   unmatched_min_radius=p.contour_unmatched_min_radius)
 
 
 class SilhouetteDetector:
@@ -100,6 +123,20 @@ class SilhouetteDetector:
             k = self._kernels[r] = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
         return cv2.dilate(disparity, k), cv2.erode(disparity, k)
 
+    def _near_wide_unmatched(self, disparity: np.ndarray, x: np.ndarray, y: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """True where an unmatched region at least ``unmatched_min_radius`` wide lies within the
+        keypoint's neighbourhood (radius ``r``)."""
+        k = self.params.unmatched_min_radius
+        hole = (disparity <= _BM_INVALID).astype(np.uint8)
+        disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * k + 1, 2 * k + 1))
+        wide = cv2.morphologyEx(hole, cv2.MORPH_OPEN, disc)
+        out = np.zeros(len(x), bool)
+        for rad in np.unique(r).tolist():
+            sel = r == rad
+            near = cv2.dilate(wide, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * rad + 1, 2 * rad + 1)))
+            out[sel] = near[y[sel], x[sel]] > 0
+        return out
+
     def radii(self, octave: np.ndarray | None, scale_factor: float) -> np.ndarray:
         """Neighbourhood radius per keypoint in downscaled px: ``window_px`` at level 0, times
         scale_factor^octave when ``octave_scaled`` (the SAD window and the ORB patch of a level-L
@@ -128,7 +165,11 @@ class SilhouetteDetector:
             dmax, dmin = self._min_max(disparity, rad)
             hi[sel], lo[sel] = dmax[y[sel], x[sel]], dmin[y[sel], x[sel]]
         # unmatched anywhere near (lo == 0: background or occluded) or a disparity step > ratio
-        step = (lo <= _BM_INVALID) | (hi > (1.0 + self.params.ratio) * lo)
+        unmatched = lo <= _BM_INVALID
+        step = (hi > (1.0 + self.params.ratio) * lo) & ~unmatched
+        if self.params.unmatched_is_contour:
+            step |= unmatched if self.params.unmatched_min_radius <= 0 else \
+                self._near_wide_unmatched(disparity, x, y, r)
         # left of first_col block matching cannot match at all: no evidence either way
         judged = x - r >= first_col
         out[:] = step & judged
@@ -137,4 +178,20 @@ class SilhouetteDetector:
     def __call__(self, left: np.ndarray, right: np.ndarray, uv: np.ndarray, octave: np.ndarray | None = None,
                  scale_factor: float = 1.2) -> np.ndarray:
         d, first = self.disparity(left, right)
-        return self.flags(d, first, uv, octave, scale_factor)
+        if not self.reliable(d, first):
+            return np.zeros(len(uv), bool)
+        on = self.flags(d, first, uv, octave, scale_factor)
+        if len(on) and on.mean() > self.params.max_flagged_fraction:
+            return np.zeros(len(uv), bool)
+        return on
+
+    @staticmethod
+    def matched_fraction(disparity: np.ndarray, first_col: int) -> float:
+        """Fraction of the searchable image (right of ``first_col``) block matching matched."""
+        searchable = disparity[:, first_col:]
+        return float((searchable > _BM_INVALID).mean()) if searchable.size else 0.0
+
+    def reliable(self, disparity: np.ndarray, first_col: int) -> bool:
+        """Whether this frame's dense disparity is evidence at all (``min_matched_fraction``)."""
+        p = self.params
+        return p.min_matched_fraction <= 0.0 or self.matched_fraction(disparity, first_col) >= p.min_matched_fraction
