@@ -223,9 +223,22 @@ def match_stereo(left: Features, right: Features | None, left_img: np.ndarray, r
     li, ri = li[keep], ri[keep]
 
     ref_left, ref_right, _ = refinement_pair(left_img, right_img, params)
-    ur, sad, ok = subpixel_refine(ref_left, ref_right, left.uv[li].astype(np.float64),
-                                  right.uv[ri, 0].astype(np.float64), left.octave[li], scale_factors,
-                                  params.subpixel_window, params.subpixel_search, params.subpixel_normalise)
+    li, ur, disp = refine_and_accept(ref_left, ref_right, left, li, right.uv[ri, 0].astype(np.float64),
+                                     scale_factors, max_disp, params, noise_sigma)
+    u_right[li] = ur
+    depth[li] = calib.bf / disp
+    return StereoMatches(u_right, depth, n_candidates=len(qi))
+
+
+def refine_and_accept(ref_left: np.ndarray, ref_right: np.ndarray, left: Features, li: np.ndarray,
+                      ur0: np.ndarray, scale_factors: np.ndarray, max_disp: float, params: TrackingParams,
+                      noise_sigma: float | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The tail every stereo matcher shares: left keypoints ``li`` with a first right column ``ur0``
+    -> (kept indices, refined right column, disparity) after the sub-pixel SAD search, the rig's
+    disparity offset, the disparity range and the SAD acceptance test."""
+    ur, sad, ok = subpixel_refine(ref_left, ref_right, left.uv[li].astype(np.float64), ur0, left.octave[li],
+                                  scale_factors, params.subpixel_window, params.subpixel_search,
+                                  params.subpixel_normalise)
     li, ur, sad = li[ok], ur[ok], sad[ok]
     # the rig's constant disparity offset (canopy.frontend.disparity_offset): u_right moves with it
     ur = ur - params.disparity_offset_for(left.extractor)
@@ -235,6 +248,4 @@ def match_stereo(left: Features, right: Features | None, left_img: np.ndarray, r
     if len(sad):
         ok = accept_sad(sad, params, noise_sigma)
         li, ur, disp = li[ok], ur[ok], disp[ok]
-    u_right[li] = ur
-    depth[li] = calib.bf / disp
-    return StereoMatches(u_right, depth, n_candidates=len(qi))
+    return li, ur, disp

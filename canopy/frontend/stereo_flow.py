@@ -25,9 +25,9 @@ import cv2
 import numpy as np
 
 from canopy.frontend.features import Features
-from canopy.frontend.noisy_features import accept_sad, refinement_pair
+from canopy.frontend.noisy_features import refinement_pair
 from canopy.frontend.params import TrackingParams
-from canopy.frontend.stereo import StereoMatches, subpixel_refine
+from canopy.frontend.stereo import StereoMatches, refine_and_accept
 from shared.types import StereoCalibration
 
 
@@ -83,16 +83,8 @@ def match_stereo_flow(left: Features, left_img: np.ndarray, right_img: np.ndarra
     ur_flow, ok = flow_right_columns(ref_left, ref_right, uv, params, max_disp)
     li = np.flatnonzero(ok)
     n_flow = len(li)
-    ur, sad, ok = subpixel_refine(ref_left, ref_right, uv[li], ur_flow[li], left.octave[li], scale_factors,
-                                  params.subpixel_window, params.subpixel_search, params.subpixel_normalise)
-    li, ur, sad = li[ok], ur[ok], sad[ok]
-    ur = ur - params.disparity_offset_for(left.extractor)
-    disp = uv[li, 0] - ur
-    ok = (disp >= params.min_disparity) & (disp <= max_disp)
-    li, ur, sad, disp = li[ok], ur[ok], sad[ok], disp[ok]
-    if len(sad):
-        ok = accept_sad(sad, params, noise_sigma)
-        li, ur, disp = li[ok], ur[ok], disp[ok]
+    li, ur, disp = refine_and_accept(ref_left, ref_right, left, li, ur_flow[li], scale_factors, max_disp,
+                                     params, noise_sigma)
     u_right[li] = ur
     depth[li] = calib.bf / disp
     return StereoMatches(u_right, depth, n_candidates=n_flow)
