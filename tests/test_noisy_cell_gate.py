@@ -87,3 +87,21 @@ def test_gate_off_is_the_plain_extractor_and_bad_input_is_refused(kitti_pair):
         NoiseGatedCellFallback(replace(params(), cell_fallback_noisy_sigma=0.0))
     with pytest.raises(ValueError, match="image"):
         NoiseGatedCellFallback(params()).extract(np.zeros((4, 4, 3), np.uint8))
+
+
+def test_gate_hands_its_robust_sigma_to_the_stereo_refinement(kitti_pair):
+    """The gate's robust sigma is the refinement's figure of the same image: the stereo step reuses
+    it (Features.robust_noise_sigma) and gets the very pair it would have measured itself."""
+    from canopy.frontend.noisy_features import refinement_pair
+    left, right = (with_noise(im, 6.0, seed) for im, seed in zip(kitti_pair, (3, 4)))
+    p = replace(params(), subpixel_denoise_sigma=4.0, subpixel_denoise_blur=2.0)
+    features = NoiseGatedCellFallback(p, responses=False).extract(left)
+    assert features.robust_noise_sigma == estimate_noise(left, rows_fraction=0.5)
+    assert features.subset(np.arange(3)).robust_noise_sigma == features.robust_noise_sigma
+    measured = refinement_pair(left, right, p)
+    reused = refinement_pair(left, right, p, features.robust_noise_sigma)
+    assert reused[2] == measured[2] >= 4.0  # noisy: the blurred pair
+    assert np.array_equal(reused[0], measured[0]) and np.array_equal(reused[1], measured[1])
+    assert not np.array_equal(reused[0], left)
+    # frames the enhancement changed are not measured by the gate: the refinement measures them
+    assert NoiseGatedCellFallback(p, responses=False).extract(left, 20, 7).robust_noise_sigma is None

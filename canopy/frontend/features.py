@@ -25,6 +25,10 @@ class Features:
     descriptors: np.ndarray  # (N,32) uint8
     # which extractor found them ("opencv" | "cells"): the stereo disparity offset depends on it
     extractor: str = "opencv"
+    # the image's robust noise sigma (canopy.enhance.noise.estimate_noise, rows_fraction 0.5) when the
+    # extractor measured it (noisy_features.NoiseGatedCellFallback): the stereo refinement's pair
+    # choice needs the same figure of the left image and reuses it instead of measuring again
+    robust_noise_sigma: float | None = None
 
     def __len__(self) -> int:
         return len(self.uv)
@@ -35,7 +39,8 @@ class Features:
                         np.zeros(0, np.float32), np.zeros((0, 32), np.uint8))
 
     def subset(self, idx: np.ndarray) -> "Features":
-        return Features(self.uv[idx], self.octave[idx], self.response[idx], self.descriptors[idx], self.extractor)
+        return Features(self.uv[idx], self.octave[idx], self.response[idx], self.descriptors[idx], self.extractor,
+                        self.robust_noise_sigma)
 
 
 def grid_select(uv: np.ndarray, response: np.ndarray, width: int, height: int,

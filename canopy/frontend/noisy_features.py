@@ -69,9 +69,11 @@ def accept_sad(sad: np.ndarray, params: TrackingParams, noise_sigma: float | Non
     return sad <= sad_acceptance_factor(med, noise_sigma, params) * med
 
 
-def refinement_pair(left_img: np.ndarray, right_img: np.ndarray, params: TrackingParams):
+def refinement_pair(left_img: np.ndarray, right_img: np.ndarray, params: TrackingParams,
+                    left_sigma: float | None = None):
     """The image pair the SAD sub-pixel refinement runs on, and the left image's robust noise σ
-    (None when not measured: ``subpixel_denoise_sigma`` 0 = off).
+    (None when not measured: ``subpixel_denoise_sigma`` 0 = off). ``left_sigma``: that σ when the
+    extractor already measured it (``Features.robust_noise_sigma``), else it is measured here.
 
     Why: on a noisy sensor the SAD costs around the minimum carry the noise of both 11×11 patches,
     so the parabola's vertex (the sub-pixel disparity) scatters, most for far points whose
@@ -87,7 +89,7 @@ def refinement_pair(left_img: np.ndarray, right_img: np.ndarray, params: Trackin
     """
     if params.subpixel_denoise_sigma <= 0:
         return left_img, right_img, None
-    sigma = estimate_noise(left_img, rows_fraction=0.5)
+    sigma = estimate_noise(left_img, rows_fraction=0.5) if left_sigma is None else left_sigma
     if sigma < params.subpixel_denoise_sigma:
         return left_img, right_img, sigma
     if params.subpixel_denoise_blur > 0:
@@ -194,7 +196,9 @@ class NoiseGatedCellFallback:
                 if float(noise_sigma) - robust >= self.params.cell_fallback_noisy_min_texture:
                     ext = self.noisy
         self.last_used = "noisy" if ext is self.noisy else "clean"
-        return ext.extract(image, fast_threshold, fallback_threshold, min_keypoints, noise_sigma=noise_sigma)
+        features = ext.extract(image, fast_threshold, fallback_threshold, min_keypoints, noise_sigma=noise_sigma)
+        features.robust_noise_sigma = self.last_robust_sigma
+        return features
 
 
 def tracking_extractor(params: TrackingParams, responses: bool = True):

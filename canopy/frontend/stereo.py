@@ -222,7 +222,7 @@ def match_stereo(left: Features, right: Features | None, left_img: np.ndarray, r
     keep = unique_by_reference(li, ri, best_d[li])
     li, ri = li[keep], ri[keep]
 
-    ref_left, ref_right, _ = refinement_pair(left_img, right_img, params)
+    ref_left, ref_right, _ = refinement_pair(left_img, right_img, params, left.robust_noise_sigma)
     li, ur, disp = refine_and_accept(ref_left, ref_right, left, li, right.uv[ri, 0].astype(np.float64),
                                      scale_factors, max_disp, params, noise_sigma)
     u_right[li] = ur

@@ -79,7 +79,7 @@ def match_stereo_flow(left: Features, left_img: np.ndarray, right_img: np.ndarra
     uv = left.uv.astype(np.float64)
     # the flow runs on the refinement's pair: on a noisy sensor (σ >= subpixel_denoise_sigma) both
     # images smoothed alike, which LK's gradients need more than the SAD does; clean frames: raw
-    ref_left, ref_right, _ = refinement_pair(left_img, right_img, params)
+    ref_left, ref_right, _ = refinement_pair(left_img, right_img, params, left.robust_noise_sigma)
     ur_flow, ok = flow_right_columns(ref_left, ref_right, uv, params, max_disp)
     li = np.flatnonzero(ok)
     n_flow = len(li)
