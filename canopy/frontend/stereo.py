@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 
 from canopy.frontend.features import Features
 from canopy.frontend.matching import as_words, best_two, hamming_pairs, unique_by_reference
@@ -77,8 +78,6 @@ def subpixel_refine(left_img: np.ndarray, right_img: np.ndarray, uvl: np.ndarray
     levels = np.unique(octave)
     pyr_l = image_pyramid(left_img, scale_factors, levels)
     pyr_r = image_pyramid(right_img, scale_factors, levels)
-    dw = np.arange(-w, w + 1)
-    strip = np.arange(-L - w, L + w + 1)
     # |differences| are <= 510: a patch's SAD fits 16 bits unsigned up to 128 pixels (11x11), and
     # 16-bit sums run ~1.6x faster than 32-bit ones; larger windows sum in 32 bits
     sum_type = np.uint16 if (2 * w + 1) ** 2 * 510 < 1 << 16 else np.int32
@@ -98,15 +97,16 @@ def subpixel_refine(left_img: np.ndarray, right_img: np.ndarray, uvl: np.ndarray
         sel, xl, yl, xr0 = sel[inside], xl[inside], yl[inside], xr0[inside]
         if len(sel) == 0:
             continue
-        rows = (yl[:, None] + dw[None, :])[:, :, None]                       # (K,P,1)
-        patch_l = il[rows, (xl[:, None] + dw[None, :])[:, None, :]].astype(np.int16)
-        band = ir[rows, (xr0[:, None] + strip[None, :])[:, None, :]].astype(np.int16)  # (K,P,2L+2w+1)
+        # whole patch rows copied from sliding-window views (the same pixels as a gather of every
+        # pixel by (row, column) index arrays, ~3x faster); uint8 until all levels are joined
+        patch_l = sliding_window_view(il, (2 * w + 1, 2 * w + 1))[yl - w, xl - w]             # (K,P,P)
+        band = sliding_window_view(ir, (2 * w + 1, 2 * (L + w) + 1))[yl - w, xr0 - L - w]   # (K,P,2L+2w+1)
         parts.append((sel, xr0, np.full(len(sel), s), patch_l, band))
     if not parts:
         return u_out, sad_out, ok_out
     sel, xr0, s = (np.concatenate([part[i] for part in parts]) for i in range(3))
-    patch_l = np.concatenate([part[3] for part in parts])
-    band = np.concatenate([part[4] for part in parts])
+    patch_l = np.concatenate([part[3] for part in parts]).astype(np.int16)
+    band = np.concatenate([part[4] for part in parts]).astype(np.int16)
     if normalise == "mean":
         sad = _zero_mean_sad(patch_l, band, 2 * L + 1)
     else:
