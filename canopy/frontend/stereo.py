@@ -237,8 +237,9 @@ def match_stereo(left: Features, right: Features | None, left_img: np.ndarray, r
 
     tol = params.row_tolerance * scale_factors[left.octave]
     qi, rj, row_rank = stereo_candidates(left, right, tol, params.octave_tolerance)
-    disp = left.uv[qi, 0] - right.uv[rj, 0]
-    ok = (disp >= params.min_disparity) & (disp <= max_disp)
+    # gathers from contiguous 1-D columns (~3x faster than from the (N,2) rows); the same values
+    disp = np.ascontiguousarray(left.uv[:, 0])[qi] - np.ascontiguousarray(right.uv[:, 0])[rj]
+    ok = np.flatnonzero((disp >= params.min_disparity) & (disp <= max_disp))
     qi, rj = qi[ok], rj[ok]
     dist = hamming_pairs(as_words(left.descriptors), as_words(right.descriptors), qi, rj)
     # equal distances go to the right keypoint higher in the image (the order of a plain row search)
