@@ -14,8 +14,10 @@ Per frame and side: the tracking thread's CPU (``time.thread_time`` around ``tra
 CPU of ``track`` (``time.process_time``: with the worker thread and OpenCV's / OpenBLAS's threads),
 the stage CPU the tracker reports (``orb``, ``orb_right``, ``stereo_worker``, ``track_local_map``,
 ...), the tracking thread's wall minus CPU minus run-queue wait ("blocked": waiting for the worker,
-for a pool thread), and the process CPU of local mapping. Prints p50 (and mean) of each side, their
-ratio, and whether the poses are bit-identical.
+for a pool thread), the wall time of ``track`` (loaded machines inflate it: compare the blocked time),
+the worker thread's CPU (the sum of its stages: ``orb_right``, ``stereo_pyramids``, ``stereo_worker``),
+and the process CPU of local mapping. Prints p50 (and mean) of each side, their ratio, and whether
+the poses are bit-identical.
 
     git archive <base-commit> | tar -x -C /tmp/base
     PYTHONPATH=$PWD python benchmarks/ab_tracking.py --base /tmp/base --dataset kitti --reps 2
@@ -33,7 +35,10 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-STAGES = ("orb", "orb_right", "stereo_worker", "match_motion", "pnp", "track_local_map", "keyframe", "stereo")
+# stereo_pyramids: the worker's SAD pyramids built before it waits for the left keypoints (s12)
+STAGES = ("orb", "orb_right", "stereo_pyramids", "stereo_worker", "match_motion", "pnp", "track_local_map", "keyframe",
+          "stereo")
+WORKER_STAGES = ("orb_right", "stereo_pyramids", "stereo_worker")
 
 
 def child(dataset: str, settings: list[str]) -> None:
@@ -93,7 +98,7 @@ def child(dataset: str, settings: list[str]) -> None:
                 schedule.keyframe_sent(res.keyframe.index, frame.index)
                 schedule.hold(update)
             poses.append(res.T_world_cam.tolist())
-            out = {"thread": thread * 1e3, "process": proc * 1e3, "mapping": mapping * 1e3,
+            out = {"thread": thread * 1e3, "process": proc * 1e3, "mapping": mapping * 1e3, "wall": wall * 1e3,
                    "blocked": (wall - (run1 - run0) * 1e-9 - (wait1 - wait0) * 1e-9) * 1e3,
                    "stages": {s: res.timings.get(s + "_cpu") for s in STAGES},
                    "stereo_wait": res.timings.get("stereo")}
@@ -153,7 +158,10 @@ def main() -> int:
         return (float(np.median(v)), float(np.mean(v))) if len(v) else (float("nan"), float("nan"))
 
     rows = [("tracking thread CPU", lambda r: r["thread"]), ("track() process CPU", lambda r: r["process"]),
-            ("tracking thread blocked", lambda r: r["blocked"]), ("stereo wait (wall)", lambda r: r["stereo_wait"])]
+            ("tracking thread blocked", lambda r: r["blocked"]), ("stereo wait (wall)", lambda r: r["stereo_wait"]),
+            ("track() wall", lambda r: r.get("wall")),
+            # the worker thread's CPU: its stages (a base without a stage counts it as 0)
+            ("worker thread CPU (stages)", lambda r: sum(r["stages"].get(s) or 0.0 for s in WORKER_STAGES) or None)]
     rows += [(f"stage {s}", lambda r, s=s: r["stages"].get(s)) for s in STAGES if s != "stereo"]
     rows += [("mapping CPU per frame", lambda r: r["mapping"])]
     print(f"{a.dataset}: {frames} frames x {a.reps} reps, frame by frame alternating; ms p50 (mean)")

@@ -49,9 +49,13 @@ def test_hamming_matches_bitwise_reference():
     rng = np.random.default_rng(0)
     a = rng.integers(0, 256, (50, 32), dtype=np.uint8)
     b = rng.integers(0, 256, (60, 32), dtype=np.uint8)
+    b[0], b[1] = ~a[0], a[1]               # the extremes: every bit differs (256), none does (0)
     ia, ib = rng.integers(0, 50, 200), rng.integers(0, 60, 200)
+    ia[:2], ib[:2] = (0, 1), (0, 1)
     ref = np.unpackbits(a[ia] ^ b[ib], axis=1).sum(axis=1)
-    np.testing.assert_array_equal(hamming_pairs(as_words(a), as_words(b), ia, ib), ref)
+    dist = hamming_pairs(as_words(a), as_words(b), ia, ib)
+    assert dist.dtype == np.int32 and dist[0] == 256 and dist[1] == 0
+    np.testing.assert_array_equal(dist, ref)
 
 
 def test_band_and_grid_pairs_match_brute_force():

@@ -15,7 +15,7 @@ from canopy.frontend import Tracker
 from canopy.frontend.features import OrbExtractor
 from canopy.frontend.matching import (as_words, band_pairs, best_two, floor_divide, grid_pairs_grouped, hamming_pairs,
                                       match_in_window)
-from canopy.frontend.stereo import match_stereo, stereo_candidates, subpixel_refine
+from canopy.frontend.stereo import PairPyramids, match_stereo, stereo_candidates, subpixel_refine
 from canopy.sources import open_source
 
 
@@ -60,6 +60,8 @@ def test_worker_thread_stereo_gives_identical_results(kitti):
     # the worker's own stage is reported, and the tracking thread no longer matches stereo itself
     res = tracker.track(frames[-1])
     assert "stereo_worker_cpu" in res.timings and "orb_cpu" in res.timings
+    # clean KITTI: the SAD pyramids were built ahead, while the worker waited for the left keypoints
+    assert "stereo_pyramids_cpu" in res.timings
 
 
 def _old_grid_pairs_grouped(q_uv, r_uv, r_group, cells):
@@ -177,6 +179,12 @@ def test_batched_sad_equals_the_keypoint_by_keypoint_search(kitti_features):
             p.subpixel_window, p.subpixel_search)
     got = subpixel_refine(*args)
     ref = _sad_reference(*args)
+    # pyramids built ahead give the same result; built from other images, they are not used
+    ahead = subpixel_refine(*args, pyramids=PairPyramids.build(frame.left, frame.right, sf))
+    other = PairPyramids.build(frame.left.copy(), np.zeros_like(frame.right), sf)
+    assert not other.serves(frame.left, frame.right)
+    for g in (ahead, subpixel_refine(*args, pyramids=other)):
+        assert all(np.array_equal(a, b) for a, b in zip(got, g))
     assert got[2].sum() > 50 and len(np.unique(left.octave[li])) >= 4
     assert np.array_equal(got[2], ref[2]) and np.array_equal(got[1], ref[1])
     assert np.allclose(got[0], ref[0], rtol=0, atol=1e-9)

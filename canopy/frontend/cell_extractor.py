@@ -279,37 +279,40 @@ class CellExtractor:
         beside it (inside its row's span) gives the run's corners exactly as the span's view does.
         At the span's ends the view stops at the run, as the span's view does."""
         nrow, ncol = empty.shape
-        pad = np.zeros((nrow, 1), np.int8)
-        step = np.diff(np.hstack([pad, empty.astype(np.int8), pad]), axis=1)
+        padded = np.zeros((nrow, ncol + 2), np.int8)
+        padded[:, 1:-1] = empty
+        step = padded[:, 1:] - padded[:, :-1]
         rows, c_start = np.nonzero(step == 1)      # runs of empty cells, row-major: [c_start, c_end)
         c_end = np.nonzero(step == -1)[1]
-        first = np.ones(len(rows), bool)
-        first[1:] = rows[1:] != rows[:-1]
-        last = np.ones(len(rows), bool)
-        last[:-1] = rows[1:] != rows[:-1]
+        first = np.zeros(len(rows), np.int64)      # 1 where the run is not its row's first
+        first[1:] = rows[1:] == rows[:-1]
+        last = np.zeros(len(rows), np.int64)       # ... not its row's last
+        last[:-1] = first[1:]
         ya = y0 + rows * ch
-        yb = np.where(rows < nrow - 1, y0 + (rows + 1) * ch, y1)
+        yb = np.where(rows < nrow - 1, ya + ch, y1)
         xa = x0 + c_start * cw
         xb = np.where(c_end < ncol, x0 + c_end * cw, x1)
-        va = xa - FAST_BORDER - (~first)      # 1 px into the neighbouring non-empty cell
-        vb = xb + FAST_BORDER + (~last)
+        va = xa - FAST_BORDER - first              # 1 px into the neighbouring non-empty cell
+        vb = xb + FAST_BORDER + last
         self._fast.setThreshold(low)
         kps, counts = [], []
+        detect = self._fast.detect
         for r0, r1, c0, c1 in zip((ya - FAST_BORDER).tolist(), (yb + FAST_BORDER).tolist(), va.tolist(), vb.tolist()):
-            k = self._fast.detect(img[r0:r1, c0:c1])
-            kps.extend(k)
+            k = detect(img[r0:r1, c0:c1])
+            kps += k
             counts.append(len(k))
         if not kps:
             return np.zeros((0, 2), np.int64), np.zeros(0, np.float32)
-        counts = np.asarray(counts)
+        run = np.repeat(np.arange(len(counts)), counts)   # the run of every corner
         pts = np.asarray(cv2.KeyPoint_convert(kps), np.float32).reshape(-1, 2).astype(np.int64)
-        pts += np.repeat(np.column_stack([va, ya - FAST_BORDER]), counts, axis=0)
+        px = pts[:, 0] + va[run]
+        py = pts[:, 1] + (ya - FAST_BORDER)[run]
         score = np.fromiter(map(_RESPONSE, kps), np.float32, len(kps))
-        ok = (pts[:, 0] >= np.repeat(xa, counts)) & (pts[:, 0] < np.repeat(xb, counts))
-        pts, score = pts[ok], score[ok]
+        ok = np.flatnonzero((px >= xa[run]) & (px < xb[run]))
+        px, py, score = px[ok], py[ok], score[ok]
         # row-major, as one FAST call per cell row returns them (the quadtree's ties keep input order)
-        order = np.argsort(pts[:, 1] * img.shape[1] + pts[:, 0], kind="stable")
-        return pts[order], score[order]
+        order = np.argsort(py * img.shape[1] + px, kind="stable")
+        return np.column_stack([px[order], py[order]]), score[order]
 
     def detect_level(self, img: np.ndarray, high: int, low: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple]:
         """FAST corners of one level: (x, y int arrays, FAST scores) with ``high`` in every cell and
