@@ -14,6 +14,11 @@ residues of the noise that do not match in the right image (KITTI 2 % light, noi
 the few real corners. Where θ finds corners the per-cell spread pays (15 % light, noisy sensor
 56.5 -> 26 mm). The 4 sigma floor (s11-noise's rule for noisy raw images) keeps the fallback
 corners of the enhanced image above what its remaining noise can flip.
+
+The count is smoothed over the sequence (an exponential moving average, the newest image weighing
+``enhanced_cells_corner_weight``): a hazy noisy sequence whose frames find 0-17 corners would
+otherwise switch extractor from frame to frame, and the switching lost frames (KITTI 15 % light,
+haze 0.06, noisy sensor, second noise draw: 100 -> 74.5 % tracked with a per-frame decision).
 """
 from __future__ import annotations
 
@@ -27,13 +32,15 @@ from canopy.frontend.track_health import image_noise_sigma
 class EnhancedCellsRule:
     """``fallback(image, fast_threshold, fallback_threshold, noise_sigma)``: the per-cell fallback
     threshold for an enhanced ``image`` (AFE's thresholds given), or None when it goes to cv2.ORB
-    (always with ``enhanced_cells_min_corners`` 0)."""
+    (always with ``enhanced_cells_min_corners`` 0). One instance per image stream (it keeps the
+    smoothed corner count of the enhanced images it has seen)."""
 
     def __init__(self, params: TrackingParams):
         self.params = params
         self._fast = cv2.FastFeatureDetector_create(int(params.fast_threshold), True,
                                                     cv2.FAST_FEATURE_DETECTOR_TYPE_9_16)
         self.last_corners: int | None = None
+        self.smoothed_corners: float | None = None
 
     def fallback(self, image: np.ndarray, fast_threshold: int | None, fallback_threshold: int,
                  noise_sigma: float | None = None) -> int | None:
@@ -45,7 +52,10 @@ class EnhancedCellsRule:
         theta = int(self.params.fast_threshold if fast_threshold is None else fast_threshold)
         self._fast.setThreshold(min(max(theta, 1), 254))
         self.last_corners = n = len(self._fast.detect(image))
-        if n < need:
+        w = float(self.params.enhanced_cells_corner_weight)
+        m = self.smoothed_corners
+        self.smoothed_corners = m = float(n) if m is None else (1.0 - w) * m + w * n
+        if m < need:
             return None
         sigma = image_noise_sigma(image) if noise_sigma is None else float(noise_sigma)
         floor = int(np.ceil(self.params.enhanced_cells_noise_factor * sigma))
