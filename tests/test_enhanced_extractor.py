@@ -71,7 +71,24 @@ def test_raw_frames_do_not_consult_the_rule(textured):
     np.testing.assert_array_equal(a.descriptors, b.descriptors)
 
 
-@pytest.mark.parametrize("field", ["enhanced_cells_min_corners", "enhanced_cells_noise_factor"])
-def test_negative_settings_are_rejected_by_name(field):
+def test_smoothed_count_keeps_the_decision_over_a_flat_frame(textured):
+    """With the moving average one flat frame in a textured sequence does not switch the extractor
+    (hazy noisy sequences flicker between 0 and ~15 corners), a run of flat frames does."""
+    p = replace(params(), enhanced_cells_corner_weight=0.2)
+    rule = EnhancedCellsRule(p)
+    assert rule.fallback(textured, 30, 3) is not None
+    n_textured = rule.last_corners
+    assert rule.fallback(flat(textured), 30, 3) is not None   # average 0.8 n, still >= 10
+    assert rule.last_corners < 10 and rule.smoothed_corners == pytest.approx(0.8 * n_textured)
+    decisions = [rule.fallback(flat(textured), 30, 3) for _ in range(40)]
+    assert decisions[-1] is None
+    per_frame = EnhancedCellsRule(params())   # weight 1: the newest image alone decides
+    per_frame.fallback(textured, 30, 3)
+    assert per_frame.fallback(flat(textured), 30, 3) is None
+
+
+@pytest.mark.parametrize("field,value", [("enhanced_cells_min_corners", -1), ("enhanced_cells_noise_factor", -1),
+                                         ("enhanced_cells_corner_weight", 0.0), ("enhanced_cells_corner_weight", 1.5)])
+def test_bad_settings_are_rejected_by_name(field, value):
     with pytest.raises(ConfigError, match=field):
-        replace(TrackingParams(), **{field: -1})
+        replace(TrackingParams(), **{field: value})
