@@ -13,7 +13,8 @@ residues of the noise that do not match in the right image (KITTI 2 % light, noi
 104 stereo points at initialisation, 74.5 -> 7.8 % tracked); cv2.ORB's global Harris ranking keeps
 the few real corners. Where θ finds corners the per-cell spread pays (15 % light, noisy sensor
 56.5 -> 26 mm). The 4 sigma floor (s11-noise's rule for noisy raw images) keeps the fallback
-corners of the enhanced image above what its remaining noise can flip.
+corners of the enhanced image above what its remaining noise can flip (15 % light, low-noise
+sensor: 63.6 mm with the 2 sigma floor, 44.9 with 4 sigma; cv2.ORB 39.4).
 
 The count is smoothed over the sequence (an exponential moving average, the newest image weighing
 ``enhanced_cells_corner_weight``): a hazy noisy sequence whose frames find 0-17 corners would
