@@ -207,8 +207,11 @@ def test_disparity_offset_follows_the_extractor_that_found_the_keypoints(kitti_p
 def test_enhanced_frames_go_to_opencv_when_configured(kitti_pair, kitti_params):
     """The AFE rule passes a fallback threshold only on frames the enhancement changed."""
     left, _, _ = kitti_pair
-    ex = CellExtractor(replace(kitti_params, extractor="cells", extractor_enhanced="opencv"))
+    ex = CellExtractor(replace(kitti_params, extractor="cells", extractor_enhanced="opencv",
+                               enhanced_cells_min_corners=0))
     assert ex.extract(left, 30, 15, 200).extractor == "opencv"
+    # KITTI's rule (canopy.frontend.enhanced_extractor): a textured enhanced frame goes to cells
+    assert CellExtractor(kitti_params).extract(left, 30, 15, 200).extractor == "cells"
     assert ex.extract(left, 30).extractor == "cells"  # the noise floor alone: still cells
     ex = CellExtractor(replace(kitti_params, extractor="cells", extractor_enhanced="cells"))
     assert ex.extract(left, 30, 15, 200).extractor == "cells"

@@ -43,6 +43,7 @@ from operator import attrgetter
 import cv2
 import numpy as np
 
+from canopy.frontend.enhanced_extractor import EnhancedCellsRule
 from canopy.frontend.features import Features, OrbExtractor
 from canopy.frontend.params import TrackingParams
 from canopy.frontend.track_health import image_noise_sigma
@@ -242,6 +243,7 @@ class CellExtractor:
                                    nlevels=1, edgeThreshold=params.edge_threshold, firstLevel=0, WTA_K=2,
                                    scoreType=cv2.ORB_HARRIS_SCORE, patchSize=params.patch_size)
         self._opencv = OrbExtractor(params) if params.extractor_enhanced == "opencv" else None
+        self._enhanced_rule = EnhancedCellsRule(params) if self._opencv is not None else None
         self.last_stats: dict = {}
 
     def pyramid(self, image: np.ndarray) -> list[np.ndarray]:
@@ -354,7 +356,10 @@ class CellExtractor:
             raise ValueError("CellExtractor.extract: image must be a non-empty 2-D uint8 grey image, got "
                              + ("None" if img is None else f"shape {img.shape} dtype {img.dtype}"))
         if fallback_threshold is not None and self._opencv is not None:
-            return self._opencv.extract(img, fast_threshold, fallback_threshold, min_keypoints)
+            cells_fallback = self._enhanced_rule.fallback(img, fast_threshold, fallback_threshold, noise_sigma)
+            if cells_fallback is None:
+                return self._opencv.extract(img, fast_threshold, fallback_threshold, min_keypoints)
+            fallback_threshold = cells_fallback
         high = int(self.params.fast_threshold if fast_threshold is None else fast_threshold)
         low, sigma = self.fallback_for(img, fallback_threshold, noise_sigma)
         img = np.ascontiguousarray(img)

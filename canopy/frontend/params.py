@@ -55,6 +55,14 @@ class TrackingParams:
     # Frames the enhancement changed (the AFE FAST rule is passed: its own adaptive threshold and
     # Eq. 19 fallback) use this extractor: "opencv" or "cells".
     extractor_enhanced: str = "opencv"
+    # ... with extractor "cells" and extractor_enhanced "opencv": an enhanced image on which AFE's
+    # Eq. 18 threshold finds at least enhanced_cells_min_corners FAST corners goes to the cells
+    # extractor anyway, its fallback at least enhanced_cells_noise_factor x the image's noise sigma
+    # (0: off; canopy.frontend.enhanced_extractor)
+    enhanced_cells_min_corners: int = 0
+    enhanced_cells_noise_factor: float = 4.0
+    # the corner count's moving average over the sequence: the newest image's weight (1: no smoothing)
+    enhanced_cells_corner_weight: float = 1.0
     cell_size: int = 30                 # px (ORB-SLAM's W = 30)
     fast_fallback_threshold: int = 7    # ORB-SLAM's minThFAST, in cells where fast_threshold finds none
     # ... but never below this many sigmas of the image's noise (track_health.image_noise_sigma,
@@ -298,6 +306,9 @@ class TrackingParams:
         need(0 < self.fast_threshold < 255, "fast_threshold", "must be in (0, 255)")
         need(self.extractor in EXTRACTORS, "extractor", f"must be one of {EXTRACTORS}")
         need(self.extractor_enhanced in EXTRACTORS, "extractor_enhanced", f"must be one of {EXTRACTORS}")
+        need(self.enhanced_cells_min_corners >= 0, "enhanced_cells_min_corners", "must be >= 0 (0: off)")
+        need(self.enhanced_cells_noise_factor >= 0, "enhanced_cells_noise_factor", "must be >= 0")
+        need(0 < self.enhanced_cells_corner_weight <= 1, "enhanced_cells_corner_weight", "must be in (0, 1]")
         need(self.cell_size >= 8, "cell_size", "must be >= 8 px")
         need(self.cell_ranking in ("harris2x", "fast", "harris"), "cell_ranking", "must be harris2x, fast or harris")
         need(0 < self.fast_fallback_threshold < 255, "fast_fallback_threshold", "must be in (0, 255)")
