@@ -46,7 +46,7 @@ def frames():
 def params() -> TrackingParams:
     """configs/synthetic.yaml's gate."""
     return replace(TrackingParams(), noisy_extractor_sigma=4.0, noisy_extractor_robust=True,
-                   noisy_extractor_max_texture=2.15, cell_fallback_noise_factor=4.0).validate()
+                   noisy_extractor_max_texture=2.0, cell_fallback_noise_factor=4.0).validate()
 
 
 def same(a, b) -> bool:
