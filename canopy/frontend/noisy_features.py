@@ -115,6 +115,10 @@ class NoiseGatedExtractor:
     ``CellExtractor`` does with ``extractor_enhanced: opencv``. Each image is judged by its own
     sigma (the right image's is ~0.2 below the left's on EuRoC); ``extract`` has the interface of
     both extractors.
+
+    With ``noisy_extractor_robust`` (the generated presets) the gate is the robust sigma and the
+    texture excess instead (``_noisy``); the robust sigma it measured is handed on as
+    ``Features.robust_noise_sigma`` (the stereo refinement's figure, ``refinement_pair``).
     """
 
     def __init__(self, params: TrackingParams, responses: bool = True):
