@@ -284,7 +284,7 @@ class TrackingParams:
     # NoiseGatedExtractor judged by the robust sigma (the generated presets, docs/notes/s12-presets.md):
     # noisy_extractor_robust: the gate compares the robust sigma (estimate_noise, rows_fraction 0.5)
     # with noisy_extractor_sigma instead of the mean one, which fine texture raises (clean day-loop
-    # 4.7-8.9 mean, 2.1-3.0 robust). noisy_extractor_max_texture: ... and only images whose texture
+    # 4.6-8.9 mean, 2.1-3.1 robust). noisy_extractor_max_texture: ... and only images whose texture
     # excess (mean - robust sigma) is below this many grey levels: noisy *and* flat (haze, a washed-out
     # row) get the per-cell extractor; noisy, textured ones keep cv2.ORB. 0: no texture test.
     noisy_extractor_robust: bool = False
