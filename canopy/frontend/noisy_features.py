@@ -115,6 +115,10 @@ class NoiseGatedExtractor:
     ``CellExtractor`` does with ``extractor_enhanced: opencv``. Each image is judged by its own
     sigma (the right image's is ~0.2 below the left's on EuRoC); ``extract`` has the interface of
     both extractors.
+
+    With ``noisy_extractor_robust`` (the generated presets) the gate is the robust sigma and the
+    texture excess instead (``_noisy``); the robust sigma it measured is handed on as
+    ``Features.robust_noise_sigma`` (the stereo refinement's figure, ``refinement_pair``).
     """
 
     def __init__(self, params: TrackingParams, responses: bool = True):
@@ -126,17 +130,53 @@ class NoiseGatedExtractor:
         n = params.noisy_extractor_n_features or params.n_features
         self.cells = CellExtractor(replace(params, extractor="cells", n_features=n), responses)
         self.last_used = ""
+        self.last_robust_sigma: float | None = None
 
     def extract(self, image: np.ndarray, fast_threshold: int | None = None,
                 fallback_threshold: int | None = None, min_keypoints: int = 0,
                 noise_sigma: float | None = None):
+        self.last_robust_sigma = None
         if fallback_threshold is None:
-            sigma = image_noise_sigma(image) if noise_sigma is None else float(noise_sigma)
-            if sigma >= self.params.noisy_extractor_sigma:
+            sigma = self._noisy(image, noise_sigma)
+            if sigma is not None:
                 self.last_used = "cells"
-                return self.cells.extract(image, fast_threshold, None, min_keypoints, noise_sigma=sigma)
+                features = self.cells.extract(image, fast_threshold, None, min_keypoints, noise_sigma=sigma)
+                features.robust_noise_sigma = self.last_robust_sigma
+                return features
         self.last_used = "opencv"
-        return self.opencv.extract(image, fast_threshold, fallback_threshold, min_keypoints)
+        features = self.opencv.extract(image, fast_threshold, fallback_threshold, min_keypoints)
+        features.robust_noise_sigma = self.last_robust_sigma
+        return features
+
+    def _noisy(self, image: np.ndarray, noise_sigma: float | None) -> float | None:
+        """The image's mean (Immerkaer) sigma, the per-cell fallback floor's, if the raw image gets the
+        per-cell extraction, else None. ``noise_sigma``: that sigma when the tracker measured it.
+
+        ``noisy_extractor_robust`` (the generated presets, docs/notes/s12-presets.md): the mean sigma
+        sees the orchard's fine texture (clean day-loop 4.6-8.9, above the noisy haze-row's 7.0-7.5),
+        the robust one barely does (clean presets 0.7-3.1, the grid's noisy sensor 4.9-7.4). And the
+        per-cell extraction helps only where the noisy image is flat: cv2.ORB's one FAST threshold (with
+        its 3 sigma noise floor) then finds its corners only in the near, textured part of a hazy row,
+        where the per-cell extractor spreads them (haze-row's noise-only cell 41.0 -> 33.3 mm, s11-noise);
+        on the textured noisy day-loop it loses 2x (6.7 -> 13.0 mm). The texture excess (mean - robust
+        sigma, KITTI's ``cell_fallback_noisy_min_texture`` measure) splits them: noisy day-loop 2.4-3.4
+        grey levels, noisy and hazy / washed-out rows 0.0-1.7. The robust sigma is measured first, so
+        a clean image costs one estimate (the mean one only when the tracker did not measure it)."""
+        p = self.params
+        if not p.noisy_extractor_robust:
+            sigma = image_noise_sigma(image) if noise_sigma is None else float(noise_sigma)
+            return sigma if sigma >= p.noisy_extractor_sigma else None
+        img = np.asarray(image) if image is not None else None
+        if img is None or img.ndim != 2 or img.dtype != np.uint8 or img.size == 0:
+            raise ValueError("NoiseGatedExtractor.extract: image must be a non-empty 2-D uint8 grey image, got "
+                             + ("None" if img is None else f"shape {img.shape} dtype {img.dtype}"))
+        robust = self.last_robust_sigma = estimate_noise(img, rows_fraction=0.5)
+        if robust < p.noisy_extractor_sigma:
+            return None
+        sigma = image_noise_sigma(img) if noise_sigma is None else float(noise_sigma)
+        if p.noisy_extractor_max_texture > 0 and sigma - robust >= p.noisy_extractor_max_texture:
+            return None
+        return sigma
 
 
 class NoiseGatedCellFallback:

@@ -289,6 +289,14 @@ class TrackingParams:
     cell_fallback_noisy_sigma: float = 0.0
     cell_fallback_noise_factor_noisy: float = 4.0
     cell_fallback_noisy_min_texture: float = 0.0
+    # NoiseGatedExtractor judged by the robust sigma (the generated presets, docs/notes/s12-presets.md):
+    # noisy_extractor_robust: the gate compares the robust sigma (estimate_noise, rows_fraction 0.5)
+    # with noisy_extractor_sigma instead of the mean one, which fine texture raises (clean day-loop
+    # 4.6-8.9 mean, 2.1-3.1 robust). noisy_extractor_max_texture: ... and only images whose texture
+    # excess (mean - robust sigma) is below this many grey levels: noisy *and* flat (haze, a washed-out
+    # row) get the per-cell extractor; noisy, textured ones keep cv2.ORB. 0: no texture test.
+    noisy_extractor_robust: bool = False
+    noisy_extractor_max_texture: float = 0.0
 
     def disparity_offset_for(self, extractor: str) -> float:
         """The calibrated disparity offset for keypoints found by ``extractor`` (Features.extractor)."""
@@ -316,6 +324,9 @@ class TrackingParams:
         need(self.cell_fallback_noisy_sigma >= 0, "cell_fallback_noisy_sigma", "must be >= 0 (0: off)")
         need(self.cell_fallback_noise_factor_noisy >= 0, "cell_fallback_noise_factor_noisy", "must be >= 0")
         need(self.cell_fallback_noisy_min_texture >= 0, "cell_fallback_noisy_min_texture", "must be >= 0 (0: no test)")
+        need(self.noisy_extractor_max_texture >= 0, "noisy_extractor_max_texture", "must be >= 0 (0: no test)")
+        need(self.noisy_extractor_max_texture == 0 or self.noisy_extractor_robust, "noisy_extractor_max_texture",
+             "needs noisy_extractor_robust: true (the excess is mean - robust sigma)")
         need(self.grid_cols > 0 and self.grid_rows > 0, "grid_cols", "and grid_rows must be > 0")
         need(self.oversample >= 1.0, "oversample", "must be >= 1")
         need(0 <= self.stereo_max_hamming <= 256, "stereo_max_hamming", "must be in [0, 256]")
