@@ -13,6 +13,7 @@ from canopy.frontend.features import OrbExtractor, grid_select
 from canopy.frontend.geometry import (PoseJacobianBuffer, differential_entropy, pose_information, project_stereo,
                                       rotation_angle,
                                       se3_exp, se3_inv, stereo_pose_jacobian)
+from canopy.frontend import matching
 from canopy.frontend.matching import (as_words, band_pairs, best_two, grid_pairs, grid_pairs_grouped, hamming_pairs,
                                       match_in_window, unique_by_reference)
 from canopy.frontend.pose import refine_pose
@@ -125,8 +126,8 @@ def _scaled_window_by_level_grids(q_uv, q_words, radius, r_uv, r_words, max_hamm
     return q[keep], best[q][keep], bd[q][keep]
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
-def test_scaled_window_search_matches_one_grid_per_scale_despite_ties(seed):
+@pytest.mark.parametrize("seed,bands", [(0, 3), (1, 3), (2, 3), (0, 1), (1, 2), (2, 8)])
+def test_scaled_window_search_matches_one_grid_per_scale_despite_ties(seed, bands, monkeypatch):
     """The local-map search's one wide grid + grid-order tie ranks (match_in_window with r_scale)
     gives the matches of one grid per pyramid scale, also when most candidates tie: descriptors from
     a handful of patterns, so equal Hamming distances are the rule."""
@@ -141,6 +142,7 @@ def test_scaled_window_search_matches_one_grid_per_scale_despite_ties(seed):
     level = rng.integers(0, 8, n_r)
     scale = 1.2 ** level
     args = (q_uv, as_words(q_desc), np.full(n_q, 4.0), r_uv, as_words(r_desc), 50, 0.9)
+    monkeypatch.setattr(matching, "SCALE_BANDS", bands)
     got = match_in_window(*args, r_scale=scale, r_level=level)
     want = _scaled_window_by_level_grids(q_uv, as_words(q_desc), 4.0, r_uv, as_words(r_desc), 50, 0.9, scale, level)
     assert len(want[0]) > 20

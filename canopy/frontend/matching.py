@@ -19,6 +19,11 @@ else:  # numpy < 2.0: 256-entry byte lookup table
         return _LUT[x.view(np.uint8)].reshape(*x.shape, 8).sum(-1)
 
 DESCRIPTOR_BYTES = 32
+# match_in_window's scaled search: reference scales merged into this many grids (see there). Recorded
+# local-map searches, ms per call (load ~30): KITTI 5.34 with one grid per scale (8), 3.05 with 3, 3.11
+# with 1; EuRoC (denser) 4.17, 4.03, 7.79: one grid finds 2.5-3.5x the pairs, 8 grids cost a ~10^5-cell
+# table and query x 8 x 3 row ranges
+SCALE_BANDS = 3
 
 
 def floor_divide(a, b) -> np.ndarray:
@@ -288,14 +293,21 @@ def match_in_window(q_uv: np.ndarray, q_words: np.ndarray, q_radius: np.ndarray,
     else:
         # The pairs within the scaled radii are the pairs of one grid per reference scale (cells of
         # rmax x scale), and equal distances go to the earlier pair of that grid's order. Those
-        # grids' cell table (~10^5 cells on KITTI) and query x scale x 3 row ranges cost ~1 ms,
-        # though ~90 % of the ranges are empty: one grid of the widest cell finds a superset (its
-        # 3x3 cells hold every pair within rmax x max scale; ~30 % more pairs, the extra ones fail
-        # the circle test below), and the per-scale grids' order only ranks the references
-        # (``grid_rank``) for ``best_two``'s ties: the same matches
+        # grids' cell table (~10^5 cells on KITTI) and query x scale x 3 row ranges cost more than
+        # the pairs, ~90 % of the ranges being empty: SCALE_BANDS grids, each with the cell of the
+        # widest scale in its band, find a superset (a band's 3x3 cells hold every pair within its
+        # widest radius; the extra pairs fail the circle test below), and the per-scale grids'
+        # order only ranks the references (``grid_rank``) for ``best_two``'s ties: the same matches
         scales, group = np.unique(r_scale, return_inverse=True)
-        tie_rank = grid_rank(q_uv[sel], r_uv, group.reshape(-1), rmax * scales)
-        qi, rj = grid_pairs_grouped(q_uv[sel], r_uv, np.zeros(len(r_uv), np.int64), np.array([rmax * scales[-1]]))
+        group = group.reshape(-1)
+        n_bands = min(SCALE_BANDS, len(scales))
+        if n_bands == len(scales):
+            qi, rj = grid_pairs_grouped(q_uv[sel], r_uv, group, rmax * scales)
+        else:
+            tie_rank = grid_rank(q_uv[sel], r_uv, group, rmax * scales)
+            band = np.arange(len(scales)) * n_bands // len(scales)
+            band_cells = rmax * scales[np.flatnonzero(np.diff(band, append=n_bands))]  # each band's widest
+            qi, rj = grid_pairs_grouped(q_uv[sel], r_uv, band[group], band_cells)
     qi = sel[qi]
     # the circle test on 1-D float64 coordinates (gathers of 2-D rows cost ~3x more); the same
     # arithmetic (dtype) as ((q - r) ** 2).sum(axis=1)
