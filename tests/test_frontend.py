@@ -10,9 +10,12 @@ import pytest
 
 from canopy.frontend import KeyframeData, Tracker, TrackingParams, match_stereo
 from canopy.frontend.features import OrbExtractor, grid_select
-from canopy.frontend.geometry import (differential_entropy, pose_information, project_stereo, rotation_angle,
+from canopy.frontend.geometry import (PoseJacobianBuffer, differential_entropy, pose_information, project_stereo,
+                                      rotation_angle,
                                       se3_exp, se3_inv, stereo_pose_jacobian)
-from canopy.frontend.matching import as_words, band_pairs, best_two, grid_pairs, hamming_pairs, match_in_window
+from canopy.frontend import matching
+from canopy.frontend.matching import (as_words, band_pairs, best_two, grid_pairs, grid_pairs_grouped, hamming_pairs,
+                                      match_in_window, unique_by_reference)
 from canopy.frontend.pose import refine_pose
 from shared.errors import ConfigError
 from shared.params import params_from_mapping
@@ -108,6 +111,45 @@ def test_window_ratio_test_only_between_candidates_on_one_level():
     assert q.tolist() == [0] and r.tolist() == [0]
 
 
+def _scaled_window_by_level_grids(q_uv, q_words, radius, r_uv, r_words, max_hamming, ratio, r_scale, r_level):
+    """match_in_window's scaled search as it was: one grid per reference scale, ties to the earlier pair."""
+    scales, group = np.unique(r_scale, return_inverse=True)
+    qi, rj = grid_pairs_grouped(q_uv, r_uv, group.reshape(-1), radius * scales)
+    d2 = ((q_uv[qi] - r_uv[rj]) ** 2).sum(axis=1)
+    ok = d2 <= (radius * r_scale[rj]) ** 2
+    qi, rj = qi[ok], rj[ok]
+    dist = hamming_pairs(q_words, r_words, qi, rj)
+    best, bd, sd, sr = best_two(qi, rj, dist, len(q_uv), second_ref=True)
+    amb = (bd >= ratio * sd) & (sr >= 0) & (r_level[np.maximum(sr, 0)] == r_level[np.maximum(best, 0)])
+    q = np.flatnonzero((best >= 0) & (bd <= max_hamming) & ~amb)
+    keep = unique_by_reference(q, best[q], bd[q])
+    return q[keep], best[q][keep], bd[q][keep]
+
+
+@pytest.mark.parametrize("seed,bands", [(0, 3), (1, 3), (2, 3), (0, 1), (1, 2), (2, 8)])
+def test_scaled_window_search_matches_one_grid_per_scale_despite_ties(seed, bands, monkeypatch):
+    """The local-map search's one wide grid + grid-order tie ranks (match_in_window with r_scale)
+    gives the matches of one grid per pyramid scale, also when most candidates tie: descriptors from
+    a handful of patterns, so equal Hamming distances are the rule."""
+    rng = np.random.default_rng(seed)
+    n_q, n_r = 400, 900
+    patterns = rng.integers(0, 256, (6, 32), dtype=np.uint8)
+    r_desc = patterns[rng.integers(0, 6, n_r)].copy()
+    r_desc[np.arange(n_r), rng.integers(0, 32, n_r)] ^= np.uint8(1)     # distances 0, 1, 2 ... tie often
+    q_desc = patterns[rng.integers(0, 6, n_q)]
+    r_uv = rng.uniform(0, [400, 150], (n_r, 2))
+    q_uv = np.concatenate([r_uv[:n_q // 2] + rng.normal(0, 2, (n_q // 2, 2)), rng.uniform(-5, [405, 155], (n_q // 2, 2))])
+    level = rng.integers(0, 8, n_r)
+    scale = 1.2 ** level
+    args = (q_uv, as_words(q_desc), np.full(n_q, 4.0), r_uv, as_words(r_desc), 50, 0.9)
+    monkeypatch.setattr(matching, "SCALE_BANDS", bands)
+    got = match_in_window(*args, r_scale=scale, r_level=level)
+    want = _scaled_window_by_level_grids(q_uv, as_words(q_desc), 4.0, r_uv, as_words(r_desc), 50, 0.9, scale, level)
+    assert len(want[0]) > 20
+    for g, w in zip(got, want):
+        np.testing.assert_array_equal(g, w)
+
+
 def test_grid_select_spreads_features():
     rng = np.random.default_rng(3)
     uv = np.concatenate([rng.uniform(0, 100, (900, 2)), rng.uniform(100, 640, (100, 2))])
@@ -178,6 +220,30 @@ def test_refine_pose_recovers_exact_pose_and_flags_outliers():
     assert not est.inliers[:10].any() and est.inliers[10:].all()
     err = se3_inv(T_true) @ est.T_cam_world
     assert np.linalg.norm(err[:3, 3]) < 1e-8 and rotation_angle(err[:3, :3]) < 1e-9
+
+
+def test_pose_jacobian_buffer_equals_stereo_pose_jacobian_bit_for_bit():
+    """The refinement's reused Jacobian buffers give stereo_pose_jacobian's values exactly, call after call."""
+    rng = np.random.default_rng(8)
+    buf = PoseJacobianBuffer(50)
+    for _ in range(3):
+        Pc = random_points(rng, 50)
+        np.testing.assert_array_equal(buf(Pc, CALIB), stereo_pose_jacobian(Pc, CALIB))
+
+
+def test_refine_pose_ignores_points_behind_the_camera():
+    """Points behind the camera get zero weight (the masked rows of refine_pose) and end as outliers."""
+    rng = np.random.default_rng(9)
+    T_true = se3_exp(np.array([0.01, -0.02, 0.03, 0.2, 0.1, -0.1]))
+    X = transform_inv(T_true, random_points(rng, 100))
+    meas, _ = project_stereo(T_true, X, CALIB)
+    Xb = X.copy()
+    Xb[:5] = transform_inv(T_true, np.array([[0.5, 0.2, -3.0]] * 5))  # behind the camera
+    T0 = se3_exp(np.array([0.005, 0.0, -0.005, 0.02, -0.02, 0.03])) @ T_true
+    est = refine_pose(T0, Xb, meas, np.ones(100, bool), np.ones(100), CALIB, 4, 10, 5.991, 7.815)
+    assert not est.inliers[:5].any() and est.inliers[5:].all() and np.isinf(est.chi2[:5]).all()
+    err = se3_inv(T_true) @ est.T_cam_world
+    assert np.linalg.norm(err[:3, 3]) < 1e-8
 
 
 def test_entropy_eq6_and_ratio_falls_with_distance():

@@ -130,6 +130,40 @@ def stereo_pose_jacobian(Pc: np.ndarray, calib: StereoCalibration) -> np.ndarray
     return Jp @ dP
 
 
+class PoseJacobianBuffer:
+    """``stereo_pose_jacobian`` of n points, called again and again (the Gauss-Newton iterations of
+    one ``refine_pose`` round): the entries that do not depend on the point (the zeros of d(u,v,ur)/dPc,
+    the identity block and zeros of dPc/dxi) are written once, each call writes the 12 others, by the
+    same products as ``stereo_point_jacobian`` / ``stereo_pose_jacobian``, and multiplies the same
+    (n,3,3) @ (n,3,6) stack: the same values, without two (n,3,6)/(n,3,3) allocations and 12 fills."""
+
+    def __init__(self, n: int):
+        self.Jp = np.zeros((n, 3, 3))
+        self.dP = np.zeros((n, 3, 6))
+        self.dP[:, 0, 3] = self.dP[:, 1, 4] = self.dP[:, 2, 5] = 1.0
+
+    def __call__(self, Pc: np.ndarray, calib: StereoCalibration) -> np.ndarray:
+        x, y, z = Pc[:, 0], Pc[:, 1], Pc[:, 2]
+        iz = 1.0 / z
+        iz2 = iz * iz
+        Jp, dP = self.Jp, self.dP
+        fx_iz = calib.fx * iz
+        Jp[:, 0, 0] = fx_iz
+        Jp[:, 0, 2] = -calib.fx * x * iz2
+        Jp[:, 1, 1] = calib.fy * iz
+        Jp[:, 1, 2] = -calib.fy * y * iz2
+        Jp[:, 2, 0] = fx_iz
+        Jp[:, 2, 2] = -calib.fx * (x - calib.baseline) * iz2
+        # -[Pc]x
+        dP[:, 0, 1] = z
+        np.negative(y, out=dP[:, 0, 2])
+        np.negative(z, out=dP[:, 1, 0])
+        dP[:, 1, 2] = x
+        dP[:, 2, 0] = y
+        np.negative(x, out=dP[:, 2, 1])
+        return Jp @ dP
+
+
 def pose_information(J: np.ndarray, sigma: np.ndarray, has_right: np.ndarray) -> np.ndarray:
     """Fisher information J^T Σ^-1 J of the pose from (N,3,6) stereo Jacobians.
 

@@ -19,6 +19,11 @@ else:  # numpy < 2.0: 256-entry byte lookup table
         return _LUT[x.view(np.uint8)].reshape(*x.shape, 8).sum(-1)
 
 DESCRIPTOR_BYTES = 32
+# match_in_window's scaled search: reference scales merged into this many grids (see there). Recorded
+# local-map searches, ms per call (load ~30): KITTI 5.34 with one grid per scale (8), 3.05 with 3, 3.11
+# with 1; EuRoC (denser) 4.17, 4.03, 7.79: one grid finds 2.5-3.5x the pairs, 8 grids cost a ~10^5-cell
+# table and query x 8 x 3 row ranges
+SCALE_BANDS = 3
 
 
 def floor_divide(a, b) -> np.ndarray:
@@ -197,6 +202,31 @@ def grid_pairs(q_uv: np.ndarray, r_uv: np.ndarray, cell: float) -> tuple[np.ndar
     return np.concatenate(qis), np.concatenate(rjs)
 
 
+def _grouped_grid(q_uv: np.ndarray, r_uv: np.ndarray, r_group: np.ndarray, cells: np.ndarray):
+    """The cell keys of ``grid_pairs_grouped``: (cells, grid origin, columns per group, cells per
+    group, each group's key offset, the references' keys)."""
+    cells = np.maximum(np.asarray(cells, float), 1.0)
+    lo_uv = np.minimum(q_uv.min(axis=0), r_uv.min(axis=0))
+    span = np.maximum(q_uv.max(axis=0), r_uv.max(axis=0)) - lo_uv
+    n_cols = (span[0] // cells).astype(np.int64) + 3
+    n_rows = (span[1] // cells).astype(np.int64) + 3
+    sizes = n_cols * n_rows
+    offset = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    rc = floor_divide(r_uv - lo_uv, cells[r_group][:, None]).astype(np.int64)
+    rkey = offset[r_group] + rc[:, 1] * n_cols[r_group] + rc[:, 0]
+    return cells, lo_uv, n_cols, sizes, offset, rkey
+
+
+def grid_rank(q_uv: np.ndarray, r_uv: np.ndarray, r_group: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """Each reference's rank in the order ``grid_pairs_grouped`` lists one query's pairs in (by
+    cell key, then reference index): with it as ``best_two``'s ``tie_rank``, any superset of that
+    function's pairs, grouped by query, resolves equal distances as its pairs would."""
+    rkey = _grouped_grid(q_uv, r_uv, r_group, cells)[-1]
+    rank = np.empty(len(rkey), np.int64)
+    rank[np.argsort(rkey, kind="stable")] = np.arange(len(rkey))
+    return rank
+
+
 def grid_pairs_grouped(q_uv: np.ndarray, r_uv: np.ndarray, r_group: np.ndarray,
                        cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``grid_pairs`` for references in groups, group g on its own grid of cell side
@@ -209,16 +239,8 @@ def grid_pairs_grouped(q_uv: np.ndarray, r_uv: np.ndarray, r_group: np.ndarray,
     cell starts (counting sort: ``bincount`` + ``cumsum``) instead of two binary searches per
     range; the pairs, and their order (by query, then key, then reference index), are those of
     the binary search."""
-    cells = np.maximum(np.asarray(cells, float), 1.0)
+    cells, lo_uv, n_cols, sizes, offset, rkey = _grouped_grid(q_uv, r_uv, r_group, cells)
     n_groups = len(cells)
-    lo_uv = np.minimum(q_uv.min(axis=0), r_uv.min(axis=0))
-    span = np.maximum(q_uv.max(axis=0), r_uv.max(axis=0)) - lo_uv
-    n_cols = (span[0] // cells).astype(np.int64) + 3
-    n_rows = (span[1] // cells).astype(np.int64) + 3
-    sizes = n_cols * n_rows
-    offset = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-    rc = floor_divide(r_uv - lo_uv, cells[r_group][:, None]).astype(np.int64)
-    rkey = offset[r_group] + rc[:, 1] * n_cols[r_group] + rc[:, 0]
     order = np.argsort(rkey, kind="stable")
     start = np.zeros(int(sizes.sum()) + 1, np.int64)   # start[k]: references with a key < k
     np.cumsum(np.bincount(rkey, minlength=len(start) - 1), out=start[1:])
@@ -265,12 +287,27 @@ def match_in_window(q_uv: np.ndarray, q_words: np.ndarray, q_radius: np.ndarray,
     if len(sel) == 0:
         return empty
     rmax = float(np.max(q_radius[sel]))
+    tie_rank = None
     if r_scale is None:
         qi, rj = grid_pairs_grouped(q_uv[sel], r_uv, np.zeros(len(r_uv), np.int64), np.array([rmax]))
     else:
-        # one grid per reference scale: coarse keypoints get wide cells, fine ones narrow cells
+        # The pairs within the scaled radii are the pairs of one grid per reference scale (cells of
+        # rmax x scale), and equal distances go to the earlier pair of that grid's order. Those
+        # grids' cell table (~10^5 cells on KITTI) and query x scale x 3 row ranges cost more than
+        # the pairs, ~90 % of the ranges being empty: SCALE_BANDS grids, each with the cell of the
+        # widest scale in its band, find a superset (a band's 3x3 cells hold every pair within its
+        # widest radius; the extra pairs fail the circle test below), and the per-scale grids'
+        # order only ranks the references (``grid_rank``) for ``best_two``'s ties: the same matches
         scales, group = np.unique(r_scale, return_inverse=True)
-        qi, rj = grid_pairs_grouped(q_uv[sel], r_uv, group.reshape(-1), rmax * scales)
+        group = group.reshape(-1)
+        n_bands = min(SCALE_BANDS, len(scales))
+        if n_bands == len(scales):
+            qi, rj = grid_pairs_grouped(q_uv[sel], r_uv, group, rmax * scales)
+        else:
+            tie_rank = grid_rank(q_uv[sel], r_uv, group, rmax * scales)
+            band = np.arange(len(scales)) * n_bands // len(scales)
+            band_cells = rmax * scales[np.flatnonzero(np.diff(band, append=n_bands))]  # each band's widest
+            qi, rj = grid_pairs_grouped(q_uv[sel], r_uv, band[group], band_cells)
     qi = sel[qi]
     # the circle test on 1-D float64 coordinates (gathers of 2-D rows cost ~3x more); the same
     # arithmetic (dtype) as ((q - r) ** 2).sum(axis=1)
@@ -281,7 +318,7 @@ def match_in_window(q_uv: np.ndarray, q_words: np.ndarray, q_radius: np.ndarray,
     ok = du * du + dv * dv <= rad * rad
     qi, rj = qi[ok], rj[ok]
     dist = hamming_pairs(q_words, r_words, qi, rj)
-    best_ref, best_d, second_d, second_r = best_two(qi, rj, dist, n_q, second_ref=True)
+    best_ref, best_d, second_d, second_r = best_two(qi, rj, dist, n_q, second_ref=True, tie_rank=tie_rank)
     ambiguous = best_d >= ratio * second_d
     if r_level is not None:
         ambiguous &= (second_r >= 0) & (r_level[np.maximum(second_r, 0)] == r_level[np.maximum(best_ref, 0)])

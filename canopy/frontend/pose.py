@@ -15,7 +15,8 @@ from typing import Protocol
 
 import numpy as np
 
-from canopy.frontend.geometry import _norm, project_stereo, se3_exp, stereo_pose_jacobian, pose_information
+from canopy.frontend.geometry import (PoseJacobianBuffer, _norm, pose_information, project_stereo, se3_exp,
+                                      stereo_pose_jacobian, transform)
 from shared.types import StereoCalibration
 
 _MIN_DEPTH = 1e-6
@@ -53,7 +54,14 @@ def refine_pose(T_cw: np.ndarray, X_w: np.ndarray, meas: np.ndarray, has_right: 
                 sigma: np.ndarray, calib: StereoCalibration, rounds: int, iterations: int,
                 chi2_mono: float, chi2_stereo: float, inliers: np.ndarray | None = None,
                 extra: ExtraTerms | None = None) -> PoseEstimate:
-    """Gauss-Newton on the point terms (Eq. 9) plus optional ``extra`` terms (Eq. 11)."""
+    """Gauss-Newton on the point terms (Eq. 9) plus optional ``extra`` terms (Eq. 11).
+
+    Every value is computed by the same operations as ``measurement_chi2`` and
+    ``stereo_pose_jacobian`` would (bit-identical poses); what the loop saves is passes over the
+    arrays: the rows in play, their sigma^2 and Huber widths are fixed per round, the residuals
+    are formed column by column, the Jacobian's constant entries are written once a round
+    (``PoseJacobianBuffer``), the masking ``np.where``s run only when a point is behind the camera,
+    and the last round's classification is the final one (same pose, same chi-square)."""
     X_w = np.asarray(X_w, float).reshape(-1, 3)
     meas = np.asarray(meas, float).reshape(-1, 3)
     hr = np.asarray(has_right, float).reshape(-1)
@@ -61,29 +69,20 @@ def refine_pose(T_cw: np.ndarray, X_w: np.ndarray, meas: np.ndarray, has_right: 
     thr = np.where(hr > 0, chi2_stereo, chi2_mono)
     inl = np.ones(len(X_w), bool) if inliers is None else inliers.copy()
     T = T_cw.copy()
+    chi2_all = Pc_all = None
     for rnd in range(rounds):
         robust = rnd < rounds - 1  # the Huber kernel is dropped in the last round
         # the inlier sets change between rounds only
         idx = np.flatnonzero(inl)
-        Xr, mr, hrr, sr, kr = X_w[idx], meas[idx], hr[idx], sigma[idx], np.sqrt(thr[idx])
         n_residuals = 3 * len(idx) + (extra.start_round() if extra is not None else 0)
+        if len(idx):
+            terms = _PointTerms(X_w[idx], meas[idx], hr[idx], sigma[idx], np.sqrt(thr[idx]), calib)
         for _ in range(iterations if n_residuals >= 6 else 0):
             H, g = np.zeros((6, 6)), np.zeros(6)
             if len(idx):
-                chi2, r, Pc = measurement_chi2(T, Xr, mr, hrr, sr, calib)
-                front = np.isfinite(chi2)
-                w = np.where(front, 1.0 / sr**2, 0.0)
-                if robust:  # Huber weight on the whitened residual norm
-                    e = np.sqrt(np.where(front, chi2, 0.0))
-                    w = w * np.where(e <= kr, 1.0, kr / np.maximum(e, 1e-12))
-                Pc = np.where(front[:, None], Pc, 1.0)  # rows behind the camera carry zero weight
-                r = np.where(front[:, None], r, 0.0)
-                J = stereo_pose_jacobian(Pc, calib).reshape(-1, 6)
-                W = np.repeat(w[:, None], 3, axis=1)
-                W[:, 2] *= hrr
-                JW = J * W.reshape(-1, 1)
+                JW, J, r = terms.weighted(T, robust)
                 H += JW.T @ J
-                g += JW.T @ r.reshape(-1)
+                g += JW.T @ r
             if extra is not None:
                 He, ge = extra.normal_equations(T, robust)
                 H += He
@@ -95,11 +94,14 @@ def refine_pose(T_cw: np.ndarray, X_w: np.ndarray, meas: np.ndarray, has_right: 
             T = se3_exp(dx) @ T
             if _norm(dx) < _CONVERGED_STEP:  # np.linalg.norm's sqrt(dx . dx), without its overhead
                 break
-        chi2, _, _ = measurement_chi2(T, X_w, meas, hr, sigma, calib)
-        inl = chi2 <= thr
+        chi2_all, _, Pc_all = measurement_chi2(T, X_w, meas, hr, sigma, calib)
+        inl = chi2_all <= thr
         if extra is not None:
             extra.classify(T)
-    chi2, _, Pc = measurement_chi2(T, X_w, meas, hr, sigma, calib)
+    if chi2_all is None:  # no round
+        chi2_all, _, Pc_all = measurement_chi2(T, X_w, meas, hr, sigma, calib)
+    # the last round's classification, at the final pose, is the final one
+    chi2, Pc = chi2_all, Pc_all
     inl = chi2 <= thr
     info = np.zeros((6, 6))
     if inl.any():
@@ -108,3 +110,60 @@ def refine_pose(T_cw: np.ndarray, X_w: np.ndarray, meas: np.ndarray, has_right: 
         extra.classify(T)
         info += extra.information(T)
     return PoseEstimate(T, inl, info, chi2)
+
+
+class _PointTerms:
+    """The point residuals of one round of ``refine_pose`` (the rows in play fixed): per
+    Gauss-Newton iteration the weighted Jacobian, the Jacobian and the residuals, each value as
+    ``measurement_chi2`` / ``stereo_pose_jacobian`` and the Huber weighting compute it."""
+
+    def __init__(self, X, meas, has_right, sigma, huber_width, calib: StereoCalibration):
+        self.X, self.hr, self.k, self.calib = X, has_right, huber_width, calib
+        self.m0, self.m1, self.m2 = meas[:, 0], meas[:, 1], meas[:, 2]
+        self.s2 = sigma**2
+        self.inv_s2 = 1.0 / self.s2
+        n = len(X)
+        self.r = np.empty((n, 3))
+        self.W = np.empty((n, 3))
+        self.jac = PoseJacobianBuffer(n)
+
+    def weighted(self, T: np.ndarray, robust: bool):
+        c, r = self.calib, self.r
+        Pc = transform(T, self.X)
+        z = Pc[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            inv_z = 1.0 / z
+            u = c.fx * Pc[:, 0] * inv_z + c.cx
+            np.subtract(self.m0, u, out=r[:, 0])
+            np.subtract(self.m1, c.fy * Pc[:, 1] * inv_z + c.cy, out=r[:, 1])
+            np.subtract(self.m2, u - c.bf * inv_z, out=r[:, 2])
+            r[:, 2] *= self.hr
+            r0, r1, r2 = r[:, 0], r[:, 1], r[:, 2]
+            chi2 = (r0 * r0 + r1 * r1 + r2 * r2) / self.s2  # = (r**2).sum(axis=1) / sigma**2
+        behind = z <= _MIN_DEPTH
+        if behind.any():  # rows behind the camera carry zero weight
+            chi2[behind] = np.inf
+            front = np.isfinite(chi2)
+            w = np.where(front, self.inv_s2, 0.0)
+            e = np.sqrt(np.where(front, chi2, 0.0)) if robust else None
+            Pc = np.where(front[:, None], Pc, 1.0)
+            r = np.where(front[:, None], r, 0.0)
+        else:
+            front = np.isfinite(chi2)
+            if front.all():
+                w = self.inv_s2
+                e = np.sqrt(chi2) if robust else None
+            else:  # (a non-finite residual in front of the camera: as the masked form)
+                w = np.where(front, self.inv_s2, 0.0)
+                e = np.sqrt(np.where(front, chi2, 0.0)) if robust else None
+                Pc = np.where(front[:, None], Pc, 1.0)
+                r = np.where(front[:, None], r, 0.0)
+        if robust:  # Huber weight on the whitened residual norm
+            k = self.k
+            w = w * np.where(e <= k, 1.0, k / np.maximum(e, 1e-12))
+        J = self.jac(Pc, c).reshape(-1, 6)
+        W = self.W
+        W[:, 0] = w
+        W[:, 1] = w
+        np.multiply(w, self.hr, out=W[:, 2])
+        return J * W.reshape(-1, 1), J, r.reshape(-1)
