@@ -134,11 +134,16 @@ class LocalBundleAdjustmentMixin:
         poses = list(local) + list(fixed)
         T_cw = np.stack([se3_inv(self.keyframes[k].T_world_cam) for k in poses])
         lm_arr = np.asarray(lm_ids, np.int64)
-        lms = [self.landmarks[lid] for lid in lm_ids]
-        # one concatenate of the small arrays, and the edges' pose indices by a lookup table over the
-        # keyframe indices (per-element Python over ~7 k edges and ~2 k points cost ~2 ms per KITTI keyframe)
-        X = np.concatenate([lm.position for lm in lms]).astype(float, copy=False).reshape(-1, 3) if lms \
-            else np.zeros((0, 3))
+        rows = getattr(self.landmarks, "rows", None)
+        if rows is not None:   # the points by one gather from the store's rows (map_store.LandmarkStore)
+            X = rows.pos[lm_arr]
+        else:
+            lms = [self.landmarks[lid] for lid in lm_ids]
+            # one concatenate of the small arrays (per-element Python over ~2 k points cost ~1 ms)
+            X = np.concatenate([lm.position for lm in lms]).astype(float, copy=False).reshape(-1, 3) if lms \
+                else np.zeros((0, 3))
+        # the edges' pose indices by a lookup table over the keyframe indices (per-element Python
+        # over ~7 k edges cost ~1 ms per KITTI keyframe)
         pose_lut = np.full(max(poses) + 1, -1, np.int64)
         pose_lut[poses] = np.arange(len(poses))
         pose_of_edge = pose_lut[e_kf]
@@ -167,8 +172,11 @@ class LocalBundleAdjustmentMixin:
             active &= ~over
         for i, k in enumerate(local):
             self.keyframes[k].T_world_cam = se3_inv(T_cw[i])
-        for lm, x in zip(lms, X):   # rows of the BA's own result array (nothing writes positions in place)
-            lm.position = x
+        if rows is not None:
+            rows.pos[lm_arr] = X
+        else:
+            for lm, x in zip(lms, X):   # rows of the BA's own result array (nothing writes positions in place)
+                lm.position = x
         bad = ~active | over
         for j in np.flatnonzero(bad).tolist():
             self._remove_observation(int(e_lm[j]), int(e_kf[j]))

@@ -24,7 +24,7 @@ import gtsam
 import numpy as np
 
 from canopy.backend.local_ba import LocalBundleAdjustmentMixin
-from canopy.backend.map_store import Keyframe, Landmark, LineLandmark, MapStoreAccess, local_map_update
+from canopy.backend.map_store import Keyframe, Landmark, LandmarkStore, LineLandmark, MapStoreAccess, local_map_update
 from canopy.backend.params import MappingParams
 from canopy.frontend.matching import as_words, _popcount64
 from canopy.frontend.messages import KeyframeData, LocalMapUpdate
@@ -36,6 +36,7 @@ __all__ = ["Keyframe", "Landmark", "LineLandmark", "LocalMapper"]
 
 
 _OBS = attrgetter("obs")
+_ID = attrgetter("id")
 
 
 def _ms(t0: float) -> float:
@@ -47,7 +48,7 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         self.calib = calib
         self.params = (params or MappingParams()).validate()
         self.keyframes: dict[int, Keyframe] = {}
-        self.landmarks: dict[int, Landmark] = {}
+        self.landmarks: dict[int, Landmark] = LandmarkStore()
         self._segment = -1
         self._segment_first: dict[int, int] = {}
         self._order = 0
@@ -189,8 +190,13 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
             w = as_words(desc.reshape(-1, 32)).reshape(len(group), n, 4)
             D = _popcount64(w[:, :, None, :] ^ w[:, None, :, :]).sum(-1)      # (G,n,n)
             best = np.argmin(np.median(D, axis=2), axis=1)
-            for lm, d in zip(group, desc[np.arange(len(group)), best]):
-                lm.descriptor = d.copy()
+            chosen = desc[np.arange(len(group)), best]
+            rows = self.landmarks.rows
+            if rows is not None:   # one scatter into the store's descriptor rows
+                rows.desc[np.fromiter(map(_ID, group), np.int64, len(group))] = chosen
+            else:
+                for lm, d in zip(group, chosen):
+                    lm.descriptor = d.copy()
 
     # ----------------------------------------------------------------- covisibility window
     def _covisible(self, rec: Keyframe) -> dict[int, int]:
