@@ -123,12 +123,10 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         Pc = np.stack([(rec.uv[idx, 0] - self.calib.cx) * z / self.calib.fx,
                        (rec.uv[idx, 1] - self.calib.cy) * z / self.calib.fy, z], axis=1)
         Pw = Pc @ rec.T_world_cam[:3, :3].T + rec.T_world_cam[:3, 3]
-        # the new landmarks' descriptors copied in one go (each landmark holds its row; nothing
-        # writes a landmark's descriptor in place: updates replace it)
-        new_desc = rec.descriptors[idx]
-        for j, (i, lid) in enumerate(zip(idx.tolist(), np.asarray(kf.new_landmark_ids)[idx].tolist())):
-            self.landmarks[lid] = Landmark(lid, Pw[j], new_desc[j], {kf.index: i},
-                                           first_order=rec.order, segment=self._segment)
+        # the new landmarks' positions and descriptors written to the store's rows in one go
+        self.landmarks.add_new([Landmark(lid, None, None, {kf.index: i}, first_order=rec.order, segment=self._segment)
+                                for i, lid in zip(idx.tolist(), np.asarray(kf.new_landmark_ids)[idx].tolist())],
+                               Pw, rec.descriptors[idx])
         rec.landmark[idx] = np.asarray(kf.new_landmark_ids)[idx]
         self._update_descriptors(touched)
         if self.params.use_lines:
