@@ -210,3 +210,39 @@ def test_final_projection_is_the_projection_at_the_returned_estimate():
         np.testing.assert_array_equal(projection_chi2(*final[0], sigma, 0.05), edge_chi2(T, Xo, edges, CALIB, 0.05))
     assert iterations[0] > 1 and iterations[1] == 1      # converged after several steps; stopped after one
     assert unchanged == [False, False, True]              # at the optimum no step is accepted
+
+
+def test_point_and_pose_blocks_equal_the_per_edge_products():
+    """The normal equations' point blocks (six entries of each symmetric 3x3 from component vectors)
+    and pose blocks (one GEMM per pose, in chunks) equal the per-edge matmul definition, with a
+    point seen several times, a local pose with no edge and chunks shorter than a pose's edges."""
+    import canopy.backend.stereo_ba as sb
+
+    rng = np.random.default_rng(3)
+    E, P, L = 400, 120, 4
+    point = np.sort(rng.integers(0, P - 1, E))          # sorted by point, as local BA gives them; point P-1 unseen
+    pose = rng.integers(0, L - 1, E)                     # pose L-1 has no edge
+    Jx, Jc, w, r = rng.normal(size=(E, 3, 3)), rng.normal(size=(E, 3, 6)), rng.uniform(0.1, 2, E), rng.normal(size=(E, 3))
+    Wr = r * w[:, None]
+    Hpp, bp = sb._point_blocks(Jx, w, Wr, sb._Groups(point, P))
+    JxT = Jx.transpose(0, 2, 1)
+    ref_H = np.zeros((P, 3, 3))
+    ref_b = np.zeros((P, 3))
+    np.add.at(ref_H, point, JxT @ (Jx * w[:, None, None]))
+    np.add.at(ref_b, point, (JxT @ Wr[..., None])[..., 0])
+    assert np.allclose(Hpp, ref_H, rtol=1e-12, atol=1e-12) and np.allclose(bp, ref_b, rtol=1e-12, atol=1e-12)
+    assert np.array_equal(Hpp, Hpp.transpose(0, 2, 1)) and not Hpp[P - 1].any()
+    old = sb.GRAM_ROWS
+    try:
+        for rows in (old, 30):   # 30 rows: every pose's edges span several chunks
+            sb.GRAM_ROWS = rows
+            Hcc, bc = sb._pose_blocks(Jc, w[:, None, None], Wr, sb._Groups(pose, L))
+            JcT = Jc.transpose(0, 2, 1)
+            ref_H = np.zeros((L, 6, 6))
+            ref_b = np.zeros((L, 6))
+            np.add.at(ref_H, pose, JcT @ (Jc * w[:, None, None]))
+            np.add.at(ref_b, pose, (JcT @ Wr[..., None])[..., 0])
+            assert np.allclose(Hcc, ref_H, rtol=1e-12, atol=1e-12) and np.allclose(bc, ref_b, rtol=1e-12, atol=1e-12)
+            assert not Hcc[L - 1].any() and not bc[L - 1].any()
+    finally:
+        sb.GRAM_ROWS = old
