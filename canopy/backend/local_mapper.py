@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import time
 from collections import Counter
-from itertools import chain, compress
-from operator import attrgetter, not_
+from itertools import chain
+from operator import attrgetter
 
 import gtsam
 import numpy as np
@@ -49,7 +49,6 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         self.params = (params or MappingParams()).validate()
         self.keyframes: dict[int, Keyframe] = {}
         self.landmarks: dict[int, Landmark] = LandmarkStore()
-        self._born: dict[int, list[int]] = {}   # keyframe order -> ids of the landmarks it created (culling)
         self._segment = -1
         self._segment_first: dict[int, int] = {}
         self._order = 0
@@ -125,10 +124,9 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
                        (rec.uv[idx, 1] - self.calib.cy) * z / self.calib.fy, z], axis=1)
         Pw = Pc @ rec.T_world_cam[:3, :3].T + rec.T_world_cam[:3, 3]
         # the new landmarks' positions and descriptors written to the store's rows in one go
-        new_ids = np.asarray(kf.new_landmark_ids)[idx].tolist()
         self.landmarks.add_new([Landmark(lid, None, None, {kf.index: i}, first_order=rec.order, segment=self._segment)
-                                for i, lid in zip(idx.tolist(), new_ids)], Pw, rec.descriptors[idx])
-        self._born[rec.order] = new_ids
+                                for i, lid in zip(idx.tolist(), np.asarray(kf.new_landmark_ids)[idx].tolist())],
+                               Pw, rec.descriptors[idx])
         rec.landmark[idx] = np.asarray(kf.new_landmark_ids)[idx]
         self._update_descriptors(touched)
         if self.params.use_lines:
@@ -235,22 +233,8 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
     def _cull(self, rec: Keyframe) -> None:
         """ORB-SLAM MapPointCulling for recent landmarks, plus landmarks left unobserved."""
         p = self.params
-        oldest = rec.order - p.recent_age_keyframes
-        for order in [o for o in self._born if o < oldest]:
-            del self._born[order]
-        if getattr(self.landmarks, "external", True):
-            candidates = self.landmarks.items()   # landmarks the index below does not know: test all
-            bad = []
-        else:
-            # the landmarks left unobserved (found at C level, without a Python step per landmark),
-            # and the recent ones: those the keyframes of the last recent_age_keyframes created
-            # (the test below skips every other landmark). Same set as testing all ~6 k landmarks
-            # (issue 8: ~1 ms per KITTI keyframe); deletion order does not change the result
-            bad = list(compress(self.landmarks.keys(), map(not_, map(_OBS, self.landmarks.values()))))
-            get = self.landmarks.get
-            candidates = {lid: lm for order in sorted(self._born) for lid in self._born[order]
-                          if (lm := get(lid)) is not None and lm.obs}.items()
-        for lid, lm in candidates:
+        bad = []
+        for lid, lm in self.landmarks.items():
             if not lm.obs:
                 bad.append(lid)
                 continue

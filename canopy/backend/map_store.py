@@ -141,12 +141,8 @@ class LandmarkStore(dict):
     def __init__(self):
         super().__init__()
         self.rows: LandmarkRows | None = LandmarkRows()
-        # a landmark stored by assignment (a restored map, a test) rather than ``add_new``: the
-        # mapper's index of recently created landmarks (``LocalMapper._born``) does not know it
-        self.external = False
 
     def __setitem__(self, lid, lm) -> None:
-        self.external = True
         if self.rows is not None and (lid != lm.id or lid < 0 or lid > _SPARSE * (len(self) + 1) + (1 << 20)):
             for other in self.values():
                 other._attach(None)
