@@ -95,6 +95,7 @@ class LocalBundleAdjustmentMixin:
                                        l_right[l_active], l_seg[l_active])
             lm_params = gtsam.LevenbergMarquardtParams()
             lm_params.setMaxIterations(p.ba_iterations)
+            lm_params.setRelativeErrorTol(p.ba_relative_tol)
             if lines is not None:
                 lm_params.setRelativeErrorTol(p.line_ba_relative_error_tol)
             values = gtsam.LevenbergMarquardtOptimizer(graph, values, lm_params).optimize()
@@ -159,7 +160,7 @@ class LocalBundleAdjustmentMixin:
             edges = StereoEdges(pose_of_edge[a], point_of_edge[a], meas[a], stereo[a], sigma[a], huber[a])
             final = []
             T_cw, X, _ = bundle_adjust_points(T_cw, len(local), X, edges, self.calib, p.ba_iterations,
-                                              final_projection=final)
+                                              final_projection=final, relative_tol=p.ba_relative_tol)
             # the last pass's test is at the final estimate: it also decides the write-back below.
             # When the pass had every edge, LM's own projection at its result is that of all_edges
             # (same arrays, per-edge arithmetic): no second projection

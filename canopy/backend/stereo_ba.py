@@ -334,14 +334,16 @@ def _apply(T_cw: np.ndarray, X: np.ndarray, dc: np.ndarray, dp: np.ndarray) -> t
 
 def bundle_adjust_points(T_cw: np.ndarray, n_local: int, X: np.ndarray, edges: StereoEdges,
                          calib: StereoCalibration, max_iterations: int,
-                         final_projection: list | None = None) -> tuple[np.ndarray, np.ndarray, int]:
+                         final_projection: list | None = None,
+                         relative_tol: float = RELATIVE_ERROR_TOL) -> tuple[np.ndarray, np.ndarray, int]:
     """Levenberg-Marquardt on the local poses ``T_cw[:n_local]`` and all points ``X``; the poses
     ``T_cw[n_local:]`` stay fixed. Returns (T_cw, X, iterations).
 
     ``final_projection``: a list to which the residuals and camera-frame points of ``edges`` at
     the returned estimate are appended, ``(r, Pc)`` as ``_project`` gives them. LM has made that
     projection already (to accept its last step), so the caller's outlier test after BA
-    (``projection_chi2``) needs no second one (issue 8: ~1 ms per KITTI BA call)."""
+    (``projection_chi2``) needs no second one (issue 8: ~1 ms per KITTI BA call).
+    ``relative_tol``: LM stops once an accepted step lowers the cost by less than this fraction."""
     T_cw = np.asarray(T_cw, float).copy()
     X = np.asarray(X, float).copy()
     if len(edges.pose) == 0:
@@ -374,7 +376,7 @@ def bundle_adjust_points(T_cw: np.ndarray, n_local: int, X: np.ndarray, edges: S
         lam = max(lam / LAMBDA_FACTOR, 1e-12)
         # converged or out of iterations: stop before linearising at the new point (its Jacobians
         # would be used by no further step)
-        if old - robust[0] < RELATIVE_ERROR_TOL * old or it == max_iterations:
+        if old - robust[0] < relative_tol * old or it == max_iterations:
             break
         lin = _Linearised(T_cw, X, edges, n_local, calib, st, projected=(proj, robust))
     if final_projection is not None:
