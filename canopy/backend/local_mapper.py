@@ -199,8 +199,9 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
     # ----------------------------------------------------------------- covisibility window
     def _covisible(self, rec: Keyframe) -> dict[int, int]:
         # the observing keyframes of all of rec's landmarks chained and counted at C level (Counter)
-        counts = Counter(chain.from_iterable(self.landmarks[lid].obs
-                                             for lid in rec.landmark[rec.landmark >= 0].tolist()))
+        # (map over the store's __getitem__: no Python frame per landmark)
+        counts = Counter(chain.from_iterable(map(_OBS, map(self.landmarks.__getitem__,
+                                                           rec.landmark[rec.landmark >= 0].tolist()))))
         counts.pop(rec.index, None)
         if self.params.use_lines:  # shared line landmarks make keyframes covisible too
             for lid in rec.line_landmark[rec.line_landmark >= 0].tolist():
@@ -222,7 +223,7 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         seen = set()
         for k in local:
             seen.update(self.keyframes[k].landmark[self.keyframes[k].landmark >= 0].tolist())
-        fixed_set = set(chain.from_iterable(self.landmarks[lid].obs for lid in seen)) - local_set
+        fixed_set = set(chain.from_iterable(map(_OBS, map(self.landmarks.__getitem__, seen)))) - local_set
         first = self._segment_first[rec.segment]
         if first in local_set and len(local) > 1:  # the segment's first keyframe fixes the gauge
             local.remove(first)
