@@ -19,9 +19,11 @@ closer is still at work) before the end is passed on, so the final map carries i
 from __future__ import annotations
 
 import queue
+import threading
 import time
 
 from actors.runtime import Actor, ActorContext
+from actors.schedstat import thread_report, thread_schedstat
 from canopy.loop.closer import LoopCloser
 from canopy.loop.vocabulary import load_vocabulary
 from canopy.loop.worker import LoopWorker, place_keyframe  # noqa: F401  (place_keyframe: used by tests)
@@ -50,11 +52,18 @@ class LoopClosingActor(Actor):
         self.worker = LoopWorker(self.closer, self.vocabulary, niceness=int(getattr(params, "niceness", 0)),
                                  idle=bool(getattr(params, "sched_idle", True)))
         self.worker.start()
+        # this process's threads from the first keyframe on (stats.json "threads": the hand-over and
+        # relay CPU per frame; the worker process's own CPU is extra.step_cpu_s)
+        self.sched_start: dict[int, tuple[int, int]] | None = None
+        self.n_frames = 0
 
     def on_message(self, msg, ctx: ActorContext) -> None:
         if isinstance(msg, LoopKeyframe):
+            if self.sched_start is None:
+                self.sched_start = thread_schedstat()
             self.worker.submit(msg)   # the hand-over: the work happens in the worker thread
         elif isinstance(msg, EndOfStream):
+            self.n_frames = int(msg.n_frames)
             self.worker.finish()
             self._wait_for_worker(ctx)
             ctx.send("local_mapping", EndOfStream(n_frames=msg.n_frames, sent_at=time.time()), block=False)
@@ -104,4 +113,8 @@ class LoopClosingActor(Actor):
                                                      sent_at=time.time()), block=False)
 
     def teardown(self, ctx: ActorContext) -> None:
+        if self.sched_start is not None:   # per frame of the stream (per keyframe if it never ended)
+            ctx.extra["threads"] = thread_report(self.sched_start, thread_schedstat(),
+                                                 {threading.get_native_id(): "loop_closing"},
+                                                 self.n_frames or int(ctx.extra.get("keyframes", 0)))
         self.worker.stop()

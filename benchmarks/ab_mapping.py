@@ -76,18 +76,25 @@ def replay(recording: Path, reps: int) -> None:
     per_kf, checksum = [], None
     for _ in range(reps):
         mapper, total = LocalMapper(rec["calibration"], params), 0.0
+        updates = hashlib.sha256()   # every local map sent to tracking: ids, positions, descriptors, poses
         for blob in rec["keyframes"]:
             kf = pickle.loads(blob)
             t0 = time.thread_time()
-            mapper.insert_keyframe(kf)
+            u = mapper.insert_keyframe(kf)
             total += time.thread_time() - t0
+            for a in (u.landmark_ids, u.positions, u.descriptors, *(u.keyframe_poses[k] for k in sorted(u.keyframe_poses))):
+                updates.update(np.ascontiguousarray(a).tobytes())
         per_kf.append(total / max(len(rec["keyframes"]), 1) * 1e3)
         pts = mapper.map_points()
         poses = np.array([mapper.keyframes[k].T_world_cam for k in sorted(mapper.keyframes)], float)
         ids = np.array(sorted(mapper.landmarks), np.int64)
         # bit-level: every point, keyframe pose and landmark id (a float sum can hide a changed last bit)
-        digest = hashlib.sha256(pts.tobytes() + poses.tobytes() + ids.tobytes()).hexdigest()[:16]
-        checksum = f"{len(pts)} points, sum {pts.sum():.9f}, sha256 {digest}"
+        desc = np.array([mapper.landmarks[i].descriptor for i in ids.tolist()], np.uint8)
+        obs = np.array([(i, k, j) for i in ids.tolist() for k, j in mapper.landmarks[i].obs.items()], np.int64)
+        digest = hashlib.sha256(pts.tobytes() + poses.tobytes() + ids.tobytes() + desc.tobytes()
+                                + obs.tobytes()).hexdigest()[:16]
+        checksum = (f"{len(pts)} points, sum {pts.sum():.9f}, sha256 {digest} (map: points, poses, ids, "
+                    f"descriptors, observations), updates sha256 {updates.hexdigest()[:16]}")
     import canopy
     print("REPLAY", " ".join(f"{x:.2f}" for x in per_kf), "|", checksum, "|", Path(canopy.__file__).parents[1])
 

@@ -210,3 +210,98 @@ def test_final_projection_is_the_projection_at_the_returned_estimate():
         np.testing.assert_array_equal(projection_chi2(*final[0], sigma, 0.05), edge_chi2(T, Xo, edges, CALIB, 0.05))
     assert iterations[0] > 1 and iterations[1] == 1      # converged after several steps; stopped after one
     assert unchanged == [False, False, True]              # at the optimum no step is accepted
+
+
+def test_point_and_pose_blocks_equal_the_per_edge_products():
+    """The normal equations' point blocks (six entries of each symmetric 3x3 from component vectors)
+    and pose blocks (one GEMM per pose, in chunks) equal the per-edge matmul definition, with a
+    point seen several times, a local pose with no edge and chunks shorter than a pose's edges."""
+    import canopy.backend.stereo_ba as sb
+
+    rng = np.random.default_rng(3)
+    E, P, L = 400, 120, 4
+    point = np.sort(rng.integers(0, P - 1, E))          # sorted by point, as local BA gives them; point P-1 unseen
+    pose = rng.integers(0, L - 1, E)                     # pose L-1 has no edge
+    Jx, Jc, w, r = rng.normal(size=(E, 3, 3)), rng.normal(size=(E, 3, 6)), rng.uniform(0.1, 2, E), rng.normal(size=(E, 3))
+    Wr = r * w[:, None]
+    Hpp, bp = sb._point_blocks(Jx, w, Wr, sb._Groups(point, P))
+    JxT = Jx.transpose(0, 2, 1)
+    ref_H = np.zeros((P, 3, 3))
+    ref_b = np.zeros((P, 3))
+    np.add.at(ref_H, point, JxT @ (Jx * w[:, None, None]))
+    np.add.at(ref_b, point, (JxT @ Wr[..., None])[..., 0])
+    assert np.allclose(Hpp, ref_H, rtol=1e-12, atol=1e-12) and np.allclose(bp, ref_b, rtol=1e-12, atol=1e-12)
+    assert np.array_equal(Hpp, Hpp.transpose(0, 2, 1)) and not Hpp[P - 1].any()
+    old = sb.GRAM_ROWS
+    try:
+        for rows in (old, 30):   # 30 rows: every pose's edges span several chunks
+            sb.GRAM_ROWS = rows
+            Hcc, bc = sb._pose_blocks(Jc, w[:, None, None], Wr, sb._Groups(pose, L))
+            JcT = Jc.transpose(0, 2, 1)
+            ref_H = np.zeros((L, 6, 6))
+            ref_b = np.zeros((L, 6))
+            np.add.at(ref_H, pose, JcT @ (Jc * w[:, None, None]))
+            np.add.at(ref_b, pose, (JcT @ Wr[..., None])[..., 0])
+            assert np.allclose(Hcc, ref_H, rtol=1e-12, atol=1e-12) and np.allclose(bc, ref_b, rtol=1e-12, atol=1e-12)
+            assert not Hcc[L - 1].any() and not bc[L - 1].any()
+    finally:
+        sb.GRAM_ROWS = old
+
+
+def test_landmark_store_keeps_values_in_rows_and_matches_plain_landmarks():
+    """``LocalMapper.landmarks`` keeps positions / descriptors in id-indexed rows: a landmark reads
+    and writes its row, a read is a copy (a position taken before BA keeps its value), a pickled
+    landmark carries its values, and the local map, ``map_points`` and a far-apart id (rows off)
+    give what plain per-object landmarks give."""
+    import pickle
+
+    from canopy.backend.map_store import Landmark, LandmarkStore, local_map_update
+
+    rng = np.random.default_rng(5)
+    mapper, _, _, updates = run_ba(rng)
+    store = mapper.landmarks
+    assert isinstance(store, LandmarkStore) and store.rows is not None
+    plain = {lid: Landmark(lid, lm.position, lm.descriptor, dict(lm.obs)) for lid, lm in store.items()}
+    window = sorted(mapper.keyframes)
+    a = local_map_update(99, mapper.keyframes, store, window[1:], window[:1])
+    b = local_map_update(99, mapper.keyframes, plain, window[1:], window[:1])
+    np.testing.assert_array_equal(a.landmark_ids, b.landmark_ids)
+    np.testing.assert_array_equal(a.positions, b.positions)
+    np.testing.assert_array_equal(a.descriptors, b.descriptors)
+    np.testing.assert_array_equal(mapper.map_points(), np.array([lm.position for lm in plain.values()]))
+    lm = next(iter(store.values()))
+    before = lm.position
+    lm.position = before + 1.0
+    np.testing.assert_array_equal(before + 1.0, store.rows.pos[lm.id])
+    assert not np.array_equal(before, lm.position)         # the earlier read did not change
+    lm.descriptor = np.full(32, 7, np.uint8)
+    copy = pickle.loads(pickle.dumps(lm))
+    assert copy._rows is None and np.array_equal(copy.position, lm.position) and (copy.descriptor == 7).all()
+    # an id far beyond the counter's range turns the rows off; every landmark keeps its values
+    far = 10 ** 12
+    store[far] = Landmark(far, np.ones(3), np.zeros(32, np.uint8), {})
+    assert store.rows is None
+    np.testing.assert_array_equal(lm.position, before + 1.0)
+    assert (lm.descriptor == 7).all() and np.array_equal(store[far].position, np.ones(3))
+    np.testing.assert_array_equal(mapper.map_points()[:-1], [x.position for x in list(store.values())[:-1]])
+
+
+def test_ba_relative_tol_stops_lm_earlier():
+    from canopy.backend.stereo_ba import StereoEdges, bundle_adjust_points
+
+    with pytest.raises(ConfigError, match="ba_relative_tol"):
+        MappingParams(ba_relative_tol=0.0)
+    rng = np.random.default_rng(6)
+    poses, X = scene(rng, n=80)
+    T_true = np.stack([se3_inv(T) for T in poses])
+    meas = [project_stereo(T_true[k], X, CALIB)[0] for k in range(N_KF)]
+    e = StereoEdges(np.repeat(np.arange(N_KF), len(X)), np.tile(np.arange(len(X)), N_KF), np.concatenate(meas),
+                    np.ones(N_KF * len(X), bool), np.ones(N_KF * len(X)), np.full(N_KF * len(X), 1e3))
+    T_init = T_true.copy()
+    for i in range(N_KF - 1):
+        T_init[i] = se3_exp(np.r_[0.01 * rng.standard_normal(3), 0.03 * rng.standard_normal(3)]) @ T_init[i]
+    X_init = X + 0.05 * rng.standard_normal(X.shape)
+    fine = bundle_adjust_points(T_init, N_KF - 1, X_init, e, CALIB, 30)
+    coarse = bundle_adjust_points(T_init, N_KF - 1, X_init, e, CALIB, 30, relative_tol=0.5)
+    assert coarse[2] < fine[2]
+    assert np.abs(fine[1] - X).max() < 1e-6

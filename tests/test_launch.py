@@ -63,7 +63,7 @@ def test_euroc_default_run_writes_every_output(tmp_path):
     assert stats["tracking"]["messages"] >= 95 and stats["tracking"]["service_ms"]["p50"] > 0
     assert stats["tracking"]["peak_rss_mb"] > 10
     # every frame-handling actor reports its own thread's CPU per frame (the 2-core budget of issue 8)
-    for actor in ("source", "enhancement", "tracking", "local_mapping"):
+    for actor in ("source", "enhancement", "tracking", "local_mapping", "loop_closing"):
         assert stats[actor]["extra"]["threads"][actor]["cpu_ms_per_frame"] > 0, actor
     # keyframes carry sent_at, so local mapping's queue wait is measured for each of them
     assert stats["local_mapping"]["queue_ms"]["p50"] is not None

@@ -95,6 +95,7 @@ class LocalBundleAdjustmentMixin:
                                        l_right[l_active], l_seg[l_active])
             lm_params = gtsam.LevenbergMarquardtParams()
             lm_params.setMaxIterations(p.ba_iterations)
+            lm_params.setRelativeErrorTol(p.ba_relative_tol)
             if lines is not None:
                 lm_params.setRelativeErrorTol(p.line_ba_relative_error_tol)
             values = gtsam.LevenbergMarquardtOptimizer(graph, values, lm_params).optimize()
@@ -134,11 +135,16 @@ class LocalBundleAdjustmentMixin:
         poses = list(local) + list(fixed)
         T_cw = np.stack([se3_inv(self.keyframes[k].T_world_cam) for k in poses])
         lm_arr = np.asarray(lm_ids, np.int64)
-        lms = [self.landmarks[lid] for lid in lm_ids]
-        # one concatenate of the small arrays, and the edges' pose indices by a lookup table over the
-        # keyframe indices (per-element Python over ~7 k edges and ~2 k points cost ~2 ms per KITTI keyframe)
-        X = np.concatenate([lm.position for lm in lms]).astype(float, copy=False).reshape(-1, 3) if lms \
-            else np.zeros((0, 3))
+        rows = getattr(self.landmarks, "rows", None)
+        if rows is not None:   # the points by one gather from the store's rows (map_store.LandmarkStore)
+            X = rows.pos[lm_arr]
+        else:
+            lms = [self.landmarks[lid] for lid in lm_ids]
+            # one concatenate of the small arrays (per-element Python over ~2 k points cost ~1 ms)
+            X = np.concatenate([lm.position for lm in lms]).astype(float, copy=False).reshape(-1, 3) if lms \
+                else np.zeros((0, 3))
+        # the edges' pose indices by a lookup table over the keyframe indices (per-element Python
+        # over ~7 k edges cost ~1 ms per KITTI keyframe)
         pose_lut = np.full(max(poses) + 1, -1, np.int64)
         pose_lut[poses] = np.arange(len(poses))
         pose_of_edge = pose_lut[e_kf]
@@ -154,7 +160,7 @@ class LocalBundleAdjustmentMixin:
             edges = StereoEdges(pose_of_edge[a], point_of_edge[a], meas[a], stereo[a], sigma[a], huber[a])
             final = []
             T_cw, X, _ = bundle_adjust_points(T_cw, len(local), X, edges, self.calib, p.ba_iterations,
-                                              final_projection=final)
+                                              final_projection=final, relative_tol=p.ba_relative_tol)
             # the last pass's test is at the final estimate: it also decides the write-back below.
             # When the pass had every edge, LM's own projection at its result is that of all_edges
             # (same arrays, per-edge arithmetic): no second projection
@@ -167,8 +173,11 @@ class LocalBundleAdjustmentMixin:
             active &= ~over
         for i, k in enumerate(local):
             self.keyframes[k].T_world_cam = se3_inv(T_cw[i])
-        for lm, x in zip(lms, X):   # rows of the BA's own result array (nothing writes positions in place)
-            lm.position = x
+        if rows is not None:
+            rows.pos[lm_arr] = X
+        else:
+            for lm, x in zip(lms, X):   # rows of the BA's own result array (nothing writes positions in place)
+                lm.position = x
         bad = ~active | over
         for j in np.flatnonzero(bad).tolist():
             self._remove_observation(int(e_lm[j]), int(e_kf[j]))

@@ -24,7 +24,7 @@ import gtsam
 import numpy as np
 
 from canopy.backend.local_ba import LocalBundleAdjustmentMixin
-from canopy.backend.map_store import Keyframe, Landmark, LineLandmark, MapStoreAccess, local_map_update
+from canopy.backend.map_store import Keyframe, Landmark, LandmarkStore, LineLandmark, MapStoreAccess, local_map_update
 from canopy.backend.params import MappingParams
 from canopy.frontend.matching import as_words, _popcount64
 from canopy.frontend.messages import KeyframeData, LocalMapUpdate
@@ -36,6 +36,7 @@ __all__ = ["Keyframe", "Landmark", "LineLandmark", "LocalMapper"]
 
 
 _OBS = attrgetter("obs")
+_ID = attrgetter("id")
 
 
 def _ms(t0: float) -> float:
@@ -47,7 +48,7 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         self.calib = calib
         self.params = (params or MappingParams()).validate()
         self.keyframes: dict[int, Keyframe] = {}
-        self.landmarks: dict[int, Landmark] = {}
+        self.landmarks: dict[int, Landmark] = LandmarkStore()
         self._segment = -1
         self._segment_first: dict[int, int] = {}
         self._order = 0
@@ -122,12 +123,10 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         Pc = np.stack([(rec.uv[idx, 0] - self.calib.cx) * z / self.calib.fx,
                        (rec.uv[idx, 1] - self.calib.cy) * z / self.calib.fy, z], axis=1)
         Pw = Pc @ rec.T_world_cam[:3, :3].T + rec.T_world_cam[:3, 3]
-        # the new landmarks' descriptors copied in one go (each landmark holds its row; nothing
-        # writes a landmark's descriptor in place: updates replace it)
-        new_desc = rec.descriptors[idx]
-        for j, (i, lid) in enumerate(zip(idx.tolist(), np.asarray(kf.new_landmark_ids)[idx].tolist())):
-            self.landmarks[lid] = Landmark(lid, Pw[j], new_desc[j], {kf.index: i},
-                                           first_order=rec.order, segment=self._segment)
+        # the new landmarks' positions and descriptors written to the store's rows in one go
+        self.landmarks.add_new([Landmark(lid, None, None, {kf.index: i}, first_order=rec.order, segment=self._segment)
+                                for i, lid in zip(idx.tolist(), np.asarray(kf.new_landmark_ids)[idx].tolist())],
+                               Pw, rec.descriptors[idx])
         rec.landmark[idx] = np.asarray(kf.new_landmark_ids)[idx]
         self._update_descriptors(touched)
         if self.params.use_lines:
@@ -189,14 +188,20 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
             w = as_words(desc.reshape(-1, 32)).reshape(len(group), n, 4)
             D = _popcount64(w[:, :, None, :] ^ w[:, None, :, :]).sum(-1)      # (G,n,n)
             best = np.argmin(np.median(D, axis=2), axis=1)
-            for lm, d in zip(group, desc[np.arange(len(group)), best]):
-                lm.descriptor = d.copy()
+            chosen = desc[np.arange(len(group)), best]
+            rows = self.landmarks.rows
+            if rows is not None:   # one scatter into the store's descriptor rows
+                rows.desc[np.fromiter(map(_ID, group), np.int64, len(group))] = chosen
+            else:
+                for lm, d in zip(group, chosen):
+                    lm.descriptor = d.copy()
 
     # ----------------------------------------------------------------- covisibility window
     def _covisible(self, rec: Keyframe) -> dict[int, int]:
         # the observing keyframes of all of rec's landmarks chained and counted at C level (Counter)
-        counts = Counter(chain.from_iterable(self.landmarks[lid].obs
-                                             for lid in rec.landmark[rec.landmark >= 0].tolist()))
+        # (map over the store's __getitem__: no Python frame per landmark)
+        counts = Counter(chain.from_iterable(map(_OBS, map(self.landmarks.__getitem__,
+                                                           rec.landmark[rec.landmark >= 0].tolist()))))
         counts.pop(rec.index, None)
         if self.params.use_lines:  # shared line landmarks make keyframes covisible too
             for lid in rec.line_landmark[rec.line_landmark >= 0].tolist():
@@ -218,7 +223,7 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         seen = set()
         for k in local:
             seen.update(self.keyframes[k].landmark[self.keyframes[k].landmark >= 0].tolist())
-        fixed_set = set(chain.from_iterable(self.landmarks[lid].obs for lid in seen)) - local_set
+        fixed_set = set(chain.from_iterable(map(_OBS, map(self.landmarks.__getitem__, seen)))) - local_set
         first = self._segment_first[rec.segment]
         if first in local_set and len(local) > 1:  # the segment's first keyframe fixes the gauge
             local.remove(first)

@@ -81,13 +81,25 @@ def _jacobians(Pc: np.ndarray, R: np.ndarray, edges: StereoEdges, calib: StereoC
     Jp = stereo_point_jacobian(Pc, calib, _MIN_DEPTH)
     Jp[:, 2, :] *= edges.stereo[:, None]
     Jpl, Pcl = (Jp, Pc) if loc is None else (np.take(Jp, loc, axis=0), np.take(Pc, loc, axis=0))
-    # dPc/dxi = [-[Pc]x | I]
-    Jc = np.empty((len(Pcl), 3, 6))
+    # dPc/dxi = [-[Pc]x | I]: row r of Jc is (Pc x Jp_r, Jp_r). Jp's rows have a zero each
+    # (d u_l/dy = d v/dx = d u_r/dy = 0, ``stereo_point_jacobian``), so the cross products are
+    # written out without those terms, on contiguous vectors (the full (m,3) column products on
+    # strided views cost ~1 ms per linearisation on KITTI, these ~0.2 ms; a dropped term was an
+    # exact zero, so the values are the same up to the sign of an exact zero)
+    x, y, z = (np.ascontiguousarray(Pcl[:, i]) for i in range(3))
+    j00, j02, j11, j12, j20, j22 = (np.ascontiguousarray(Jpl[:, r, c])
+                                    for r, c in ((0, 0), (0, 2), (1, 1), (1, 2), (2, 0), (2, 2)))
+    Jc = np.zeros((len(Pcl), 3, 6))
     Jc[:, :, 3:] = Jpl
-    xc, yc, zc = Pcl[:, 0, None], Pcl[:, 1, None], Pcl[:, 2, None]
-    Jc[:, :, 0] = Jpl[:, :, 1] * -zc + Jpl[:, :, 2] * yc
-    Jc[:, :, 1] = Jpl[:, :, 0] * zc - Jpl[:, :, 2] * xc
-    Jc[:, :, 2] = -Jpl[:, :, 0] * yc + Jpl[:, :, 1] * xc
+    Jc[:, 0, 0] = j02 * y
+    Jc[:, 0, 1] = j00 * z - j02 * x
+    Jc[:, 0, 2] = -j00 * y
+    Jc[:, 1, 0] = j11 * -z + j12 * y
+    Jc[:, 1, 1] = -j12 * x
+    Jc[:, 1, 2] = j11 * x
+    Jc[:, 2, 0] = j22 * y
+    Jc[:, 2, 1] = j20 * z - j22 * x
+    Jc[:, 2, 2] = -j20 * y
     return Jc, Jp @ R
 
 
@@ -199,6 +211,54 @@ def _inv_sym3(H: np.ndarray, lam: float) -> np.ndarray:
     return out
 
 
+_UPPER3 = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
+GRAM_ROWS = 3072   # rows per GEMM in _pose_blocks: 6 x 6 x 3072 stays below OpenBLAS's threading threshold
+
+
+def _point_blocks(Jx: np.ndarray, w: np.ndarray, Wr: np.ndarray, groups: "_Groups") -> tuple[np.ndarray, np.ndarray]:
+    """Per point: H_pp = sum_e w_e Jx_e^T Jx_e (3x3) and b_p = sum_e Jx_e^T (w_e r_e) (Triggs et al.
+    2000, §6.1: the point blocks of the normal equations). Computed from the Jacobians' nine
+    components as contiguous vectors over the edges: the six distinct entries of the symmetric
+    block and the three of b_p are 45 vector operations, where one batched 3x3 matmul per edge
+    (a BLAS call each) cost ~4x more on KITTI's ~5 k edges (issue 8). Same sums, rounded differently."""
+    J = np.ascontiguousarray(Jx.reshape(-1, 9).T)        # J[3k + i] = d(residual k)/d(X_i)
+    Jw = J * w
+    cols = np.empty((9, len(w)))
+    for c, (i, j) in enumerate(_UPPER3):
+        cols[c] = Jw[i] * J[j] + Jw[3 + i] * J[3 + j] + Jw[6 + i] * J[6 + j]
+    Wrt = np.ascontiguousarray(Wr.T)
+    for i in range(3):
+        cols[6 + i] = J[i] * Wrt[0] + J[3 + i] * Wrt[1] + J[6 + i] * Wrt[2]
+    sums = groups.sum(np.ascontiguousarray(cols.T))      # (P, 9)
+    H = np.empty((len(sums), 3, 3))
+    for c, (i, j) in enumerate(_UPPER3):
+        H[:, i, j] = sums[:, c]
+        H[:, j, i] = sums[:, c]
+    return H, np.ascontiguousarray(sums[:, 6:])
+
+
+def _pose_blocks(Jc: np.ndarray, wl: np.ndarray, Wr: np.ndarray, groups: "_Groups") -> tuple[np.ndarray, np.ndarray]:
+    """Per local pose: H_cc = sum_e w_e Jc_e^T Jc_e (6x6) and b_c = sum_e Jc_e^T (w_e r_e), as one
+    (6 x 3n)(3n x 6) GEMM and one GEMV over the pose's n edges stacked, in chunks of ``GRAM_ROWS``
+    rows (a 6x3x6 matmul per edge and their sums cost ~1.5 ms per linearisation on KITTI; these
+    ~0.2 ms). Same sums, rounded differently."""
+    n = groups.n
+    H, b = np.zeros((n, 6, 6)), np.zeros((n, 6))
+    if not len(groups.starts):
+        return H, b
+    order = groups.order
+    A = np.take(Jc, order, axis=0).reshape(-1, 6)
+    Aw = np.take(Jc * wl, order, axis=0).reshape(-1, 6)
+    rw = np.take(Wr, order, axis=0).reshape(-1)
+    ends = np.r_[groups.starts[1:], len(order)]
+    for key, a, e in zip(groups.keys.tolist(), (3 * groups.starts).tolist(), (3 * ends).tolist()):
+        for c in range(a, e, GRAM_ROWS):
+            d = min(c + GRAM_ROWS, e)
+            H[key] += A[c:d].T @ Aw[c:d]
+            b[key] += A[c:d].T @ rw[c:d]
+    return H, b
+
+
 class _Linearised:
     """Normal equations of one linearisation point, eliminated onto the local poses."""
 
@@ -214,13 +274,10 @@ class _Linearised:
         loc = st.loc
         Jc, Jx = _jacobians(Pc, R, edges, calib, loc)                    # Jc: local edges only
         Wr = r * w[:, None]
-        JxT = Jx.transpose(0, 2, 1)
-        self.Hpp = st.by_point.sum(JxT @ (Jx * w[:, None, None]))
-        self.bp = st.by_point.sum(_mv(JxT, Wr))
+        self.Hpp, self.bp = _point_blocks(Jx, w, Wr, st.by_point)
         JlT = Jc.transpose(0, 2, 1)
         wl = np.take(w, loc)[:, None, None]
-        self.Hcc = st.loc_by_pose.sum(JlT @ (Jc * wl))
-        self.bc = st.loc_by_pose.sum(_mv(JlT, np.take(Wr, loc, axis=0)))
+        self.Hcc, self.bc = _pose_blocks(Jc, wl, np.take(Wr, loc, axis=0), st.loc_by_pose)
         self.Hcp = JlT @ (np.take(Jx, loc, axis=0) * wl)                  # (m,6,3)
         self.pts, self.kf = edges.point[loc], edges.pose[loc]
         self.n_local = n_local
@@ -289,14 +346,16 @@ def _apply(T_cw: np.ndarray, X: np.ndarray, dc: np.ndarray, dp: np.ndarray) -> t
 
 def bundle_adjust_points(T_cw: np.ndarray, n_local: int, X: np.ndarray, edges: StereoEdges,
                          calib: StereoCalibration, max_iterations: int,
-                         final_projection: list | None = None) -> tuple[np.ndarray, np.ndarray, int]:
+                         final_projection: list | None = None,
+                         relative_tol: float = RELATIVE_ERROR_TOL) -> tuple[np.ndarray, np.ndarray, int]:
     """Levenberg-Marquardt on the local poses ``T_cw[:n_local]`` and all points ``X``; the poses
     ``T_cw[n_local:]`` stay fixed. Returns (T_cw, X, iterations).
 
     ``final_projection``: a list to which the residuals and camera-frame points of ``edges`` at
     the returned estimate are appended, ``(r, Pc)`` as ``_project`` gives them. LM has made that
     projection already (to accept its last step), so the caller's outlier test after BA
-    (``projection_chi2``) needs no second one (issue 8: ~1 ms per KITTI BA call)."""
+    (``projection_chi2``) needs no second one (issue 8: ~1 ms per KITTI BA call).
+    ``relative_tol``: LM stops once an accepted step lowers the cost by less than this fraction."""
     T_cw = np.asarray(T_cw, float).copy()
     X = np.asarray(X, float).copy()
     if len(edges.pose) == 0:
@@ -329,7 +388,7 @@ def bundle_adjust_points(T_cw: np.ndarray, n_local: int, X: np.ndarray, edges: S
         lam = max(lam / LAMBDA_FACTOR, 1e-12)
         # converged or out of iterations: stop before linearising at the new point (its Jacobians
         # would be used by no further step)
-        if old - robust[0] < RELATIVE_ERROR_TOL * old or it == max_iterations:
+        if old - robust[0] < relative_tol * old or it == max_iterations:
             break
         lin = _Linearised(T_cw, X, edges, n_local, calib, st, projected=(proj, robust))
     if final_projection is not None:
