@@ -222,3 +222,29 @@ def test_contour_landmarks_keeps_rim_points_in_the_map_as_bearing_only():
     assert on_rim.sum() >= 0.8 * truth.sum()
     assert np.all(first.new_landmark_ids[on_rim] >= 0)
     assert max(e for _, e, _ in out) < 0.01 and max(a for _, _, a in out) < 0.1
+
+
+def test_turn_gate_tests_only_frames_whose_motion_turns_enough():
+    # tracking.contour_min_rotation_deg: the scene's camera turns 0.57 deg a frame. Above that the
+    # gate never opens and tracking is the contour-off run bit for bit; below it the first frame (no
+    # motion model yet) is untested and the later keyframes' rim points are bearing-only
+    kf_off, out_off, _ = _track(TrackingParams(**NO_SAD))
+    kf_hi, out_hi, _ = _track(TrackingParams(contour_enabled=True, contour_min_rotation_deg=5.0, **NO_SAD))
+    assert [k.index for k in kf_hi] == [k.index for k in kf_off]
+    for (Ta, _, _), (Tb, _, _) in zip(out_off, out_hi):
+        np.testing.assert_array_equal(Ta, Tb)
+    kf_lo, out_lo, _ = _track(TrackingParams(contour_enabled=True, contour_min_rotation_deg=0.3, **NO_SAD))
+    np.testing.assert_array_equal(kf_lo[0].u_right, kf_off[0].u_right)
+    later = [k for k in kf_lo if k.index >= 2]
+    assert later
+    poses = [se3_exp(np.array([0.01 * i, 0.005 * i, 0.03 * i, 0.0, 0.01 * i, 0.0])) for i in range(8)]
+    for k in later:
+        *_, depth = _scene(poses[k.index])  # the exact depth seen from that keyframe (_track's poses)
+        truth = _true_contour(depth, k.uv.astype(np.float64)) & (k.depth > 0)
+        assert truth.sum() >= 5 and (truth & (k.u_right < 0)).sum() >= 0.6 * truth.sum()  # frame 0: none
+    assert max(e for _, e, _ in out_lo) < 0.01 and max(a for _, _, a in out_lo) < 0.1
+
+
+def test_turn_gate_setting_is_checked():
+    with pytest.raises(ConfigError, match="contour_min_rotation_deg"):
+        TrackingParams(contour_min_rotation_deg=-1.0)

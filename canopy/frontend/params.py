@@ -191,6 +191,11 @@ class TrackingParams:
     # tracking and BA): without them the far crowns / sky rims that pin the heading leave the map
     # (docs/notes/s7-drift.md). False: contour points make no landmark (s6's rule).
     contour_landmarks: bool = False
+    # > 0: the contour test runs only on frames whose constant-velocity motion (the last tracked
+    # frame-to-frame motion) rotates by at least this many degrees, i.e. in turns. On the generated
+    # day-loop the contour points fix the U-turns' pitch but make the straight rows 0.4 % long
+    # (docs/notes/s11-drift.md §3, s12-drift.md). 0: every frame is tested.
+    contour_min_rotation_deg: float = 0.0
 
     # --- motion estimation (AGRI §3.2.3: EPnP in RANSAC, then motion-only refinement)
     pnp_reprojection_error: float = 3.0  # px, RANSAC inlier threshold
@@ -366,6 +371,7 @@ class TrackingParams:
         need(0.0 <= self.contour_min_matched_fraction <= 1.0, "contour_min_matched_fraction", "must be in [0, 1]")
         need(self.contour_unmatched_min_radius >= 0, "contour_unmatched_min_radius", "must be >= 0")
         need(0.0 < self.contour_max_flagged_fraction <= 1.0, "contour_max_flagged_fraction", "must be in (0, 1]")
+        need(self.contour_min_rotation_deg >= 0, "contour_min_rotation_deg", "must be >= 0 degrees")
         need(self.pnp_reprojection_error > 0, "pnp_reprojection_error", "must be > 0")
         need(self.pnp_iterations > 0, "pnp_iterations", "must be > 0")
         need(0 < self.pnp_confidence < 1, "pnp_confidence", "must be in (0, 1)")

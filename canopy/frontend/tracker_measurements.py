@@ -68,7 +68,7 @@ class TrackerMeasurementsMixin:
     def _flag_contours(self, left_img: np.ndarray, right_img: np.ndarray, feats: Features,
                        stereo: StereoMatches) -> StereoMatches:
         """``stereo`` with ``on_contour`` set for its matched keypoints (unchanged when off)."""
-        if self._silhouette is None:
+        if self._silhouette is None or not self._contour_turn_gate():
             return stereo
         on = np.zeros(len(stereo.depth), bool)
         idx = np.flatnonzero(stereo.valid)
@@ -76,6 +76,18 @@ class TrackerMeasurementsMixin:
             on[idx] = self._silhouette(left_img, right_img, feats.uv[idx].astype(np.float64), feats.octave[idx],
                                        self.params.scale_factor)
         return StereoMatches(stereo.u_right, stereo.depth, stereo.n_candidates, on_contour=on)
+
+    def _contour_turn_gate(self) -> bool:
+        """True when this frame gets the contour test: always with ``contour_min_rotation_deg`` 0,
+        else only while the constant-velocity model (the last frame-to-frame motion) turns by at
+        least that angle. The angle is the rotation's, trace(R) = 1 + 2 cos(angle)."""
+        min_deg = self.params.contour_min_rotation_deg
+        if min_deg <= 0:
+            return True
+        if not self._velocity_valid:
+            return False
+        c = 0.5 * (float(np.trace(self._velocity[:3, :3])) - 1.0)
+        return bool(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))) >= min_deg)
 
     def _monocular_stereo(self, stereo: StereoMatches) -> np.ndarray:
         """Stereo points measured bearing-only: beyond the stereo measurement depth, or on an
