@@ -93,6 +93,25 @@ def test_gate_keeps_cv2_orb_on_clean_and_textured_noisy_images_and_cells_on_flat
     assert loose.last_used == "cells"
 
 
+def test_enhanced_frames_follow_the_enhanced_cells_rule_when_it_is_on(frames):
+    """enhanced_cells_min_corners > 0: a frame the enhancement changed goes through CellExtractor's
+    EnhancedCellsRule (the per-cell extractor when AFE's threshold finds enough corners, else cv2.ORB);
+    0 (the default) keeps cv2.ORB."""
+    row = frames["haze-row"]["noise"]
+    on = replace(params(), enhanced_cells_min_corners=10)
+    gate = NoiseGatedExtractor(on, responses=False)
+    cells = CellExtractor(replace(on, extractor="cells"), responses=False)
+    orb = OrbExtractor(on)
+    got = gate.extract(row, 20, 7)  # a textured image: threshold 20 finds corners -> per-cell extraction
+    assert gate.last_used == "enhanced" and cells._enhanced_rule.fallback(row, 20, 7) is not None
+    assert same(got, cells.extract(row, 20, 7)) and not same(got, orb.extract(row, 20, 7))
+    flat = np.full_like(row, 128)
+    flat[200:240, 300:340] = 140  # one low-contrast square: no corner at threshold 20 -> cv2.ORB
+    assert same(gate.extract(flat, 20, 7), orb.extract(flat, 20, 7))
+    off = NoiseGatedExtractor(params(), responses=False)
+    assert same(off.extract(row, 20, 7), orb.extract(row, 20, 7)) and off.last_used == "opencv"
+
+
 def test_bad_settings_and_input_are_refused():
     with pytest.raises(ConfigError, match="noisy_extractor_max_texture"):
         replace(TrackingParams(), noisy_extractor_max_texture=-1.0).validate()

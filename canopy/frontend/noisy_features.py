@@ -143,6 +143,14 @@ class NoiseGatedExtractor:
                 features = self.cells.extract(image, fast_threshold, None, min_keypoints, noise_sigma=sigma)
                 features.robust_noise_sigma = self.last_robust_sigma
                 return features
+        elif self.params.enhanced_cells_min_corners > 0:
+            # an enhanced frame: KITTI's EnhancedCellsRule (canopy.frontend.enhanced_extractor, inside
+            # CellExtractor) picks the per-cell extractor with its 4 sigma floor or cv2.ORB (s12-dark)
+            self.last_used = "enhanced"
+            features = self.cells.extract(image, fast_threshold, fallback_threshold, min_keypoints,
+                                          noise_sigma=noise_sigma)
+            features.robust_noise_sigma = None
+            return features
         self.last_used = "opencv"
         features = self.opencv.extract(image, fast_threshold, fallback_threshold, min_keypoints)
         features.robust_noise_sigma = self.last_robust_sigma

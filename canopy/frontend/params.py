@@ -58,7 +58,8 @@ class TrackingParams:
     # ... with extractor "cells" and extractor_enhanced "opencv": an enhanced image on which AFE's
     # Eq. 18 threshold finds at least enhanced_cells_min_corners FAST corners goes to the cells
     # extractor anyway, its fallback at least enhanced_cells_noise_factor x the image's noise sigma
-    # (0: off; canopy.frontend.enhanced_extractor)
+    # (0: off; canopy.frontend.enhanced_extractor). The presets' NoiseGatedExtractor follows the same
+    # rule when > 0 (measured there and not used: docs/notes/s12-dark.md, second task)
     enhanced_cells_min_corners: int = 0
     enhanced_cells_noise_factor: float = 4.0
     # the corner count's moving average over the sequence: the newest image's weight (1: no smoothing)
