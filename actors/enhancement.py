@@ -62,8 +62,12 @@ class EnhancementActor(Actor):
             ctx.send("tracking", EndOfStream(n_frames=self.backlog.end.n_frames, sent_at=time.time()))
             ctx.stop()
             return None
+        # The raw slot is read in place (no copy): when ``auto`` decides "none" the enhancer
+        # returns its inputs and the one copy is the write into our ring. The source may overwrite
+        # the slot meanwhile (a reader a whole ring behind): checked once the pixels are used, the
+        # frame then counts as dropped, as a torn copy did (shared.ring's seqlock).
         try:
-            index, stamp, (left, right) = self.in_ring.read(handle.slot, handle.generation)
+            index, stamp, (left, right) = self.in_ring.view(handle.slot, handle.generation)
         except SlotOverwritten:
             ctx.dropped += 1
             return handle.sent_at
@@ -74,6 +78,9 @@ class EnhancementActor(Actor):
         enhance_ms = (time.perf_counter() - t0) * 1e3
         check_pair(left_e, right_e, lay.height, lay.width, index)
         slot, gen = self.out_ring.write(index, stamp, [left_e, right_e])
+        if not self.in_ring.holds(handle.slot, handle.generation):
+            ctx.dropped += 1   # the written slot is never announced, so nobody reads it
+            return handle.sent_at
         self.methods[info["method"]] = self.methods.get(info["method"], 0) + 1
         self.n_frames += 1
         ctx.extra["methods"] = dict(self.methods)

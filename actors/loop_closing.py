@@ -29,12 +29,15 @@ from canopy.loop.vocabulary import load_vocabulary
 from canopy.loop.worker import LoopWorker, place_keyframe  # noqa: F401  (place_keyframe: used by tests)
 from protocol.messages import EndOfStream, LoopKeyframe, LoopResult
 
-OUTBOX_POLL_S = 0.05   # how often this thread looks for the worker's answers
+OUTBOX_POLL_S = 0.05   # how often this thread looks for a thread worker's answers (no fd to wait on)
 KEEPALIVE_S = 1.0      # at the end of the stream: "still at work" to local mapping this often
 
 
 class LoopClosingActor(Actor):
     name = "loop_closing"
+    # With a worker process the run loop wakes on the inbox, control and the worker's outbox pipe
+    # (``wait_fds``) and for the heartbeat, so idle time is slept through instead of polled at 20 Hz.
+    idle_wait_s = 1.0
 
     def setup(self, ctx: ActorContext) -> None:
         params = self.config["params"]
@@ -69,8 +72,14 @@ class LoopClosingActor(Actor):
             ctx.send("local_mapping", EndOfStream(n_frames=msg.n_frames, sent_at=time.time()), block=False)
             ctx.stop()
 
+    def wait_fds(self) -> list[int]:
+        fd = self.worker.outbox_fd()
+        return [] if fd is None else [fd]
+
     def next_tick_s(self) -> float | None:
-        return 0.0 if not self.worker.outbox.empty() else OUTBOX_POLL_S
+        if not self.worker.outbox.empty():
+            return 0.0
+        return None if self.worker.outbox_fd() is not None else OUTBOX_POLL_S
 
     def on_tick(self, ctx: ActorContext) -> float | None:
         self._flush(ctx)

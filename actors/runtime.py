@@ -137,6 +137,10 @@ class Actor:
     # False for actors whose messages only queue work (frames go to a backlog,
     # acknowledgements to the source): their service time is measured in on_tick.
     measure_messages = True
+    # Longest wait for a message when ``next_tick_s`` is None; the run loop still wakes when the
+    # stats message (the heartbeat) is due. Actors that only wait on their inbox and ``wait_fds``
+    # may raise it to sleep through idle time (each wake-up costs CPU on a loaded machine).
+    idle_wait_s = 0.1
 
     def __init__(self, config: dict, seed: int = 0):
         self.config = config
@@ -154,6 +158,12 @@ class Actor:
     def next_tick_s(self) -> float | None:
         """Seconds until ``on_tick`` wants to run; None = only on messages."""
         return None
+
+    def wait_fds(self) -> list[int]:
+        """File descriptors (besides the inbox and control sockets) whose readiness should wake
+        the run loop, e.g. a worker process's result pipe: waits then block on them instead of
+        polling. Asked once, after ``setup``."""
+        return []
 
     def on_tick(self, ctx: ActorContext) -> float | None:
         """Do due work. Return None if nothing was done, else the ``sent_at`` of
@@ -232,9 +242,16 @@ def actor_main(spec: ActorSpec) -> None:
         poller = zmq.Poller()
         poller.register(ctx.control, zmq.POLLIN)
         poller.register(ctx.inbox, zmq.POLLIN)
+        for fd in actor.wait_fds():
+            poller.register(fd, zmq.POLLIN)
+        idle_ms = max(1, int(actor.idle_wait_s * 1000))
         while not ctx.stop_requested:
             tick = actor.next_tick_s()
-            timeout_ms = 100 if tick is None else max(0, min(100, int(tick * 1000)))
+            if tick is None:   # no later than the next stats message (the heartbeat)
+                stats_due_ms = int((meter.last + STATS_PERIOD_S - time.monotonic()) * 1000) + 1
+                timeout_ms = max(0, min(idle_ms, stats_due_ms))
+            else:
+                timeout_ms = max(0, min(100, int(tick * 1000)))
             ready = dict(poller.poll(timeout_ms))
             if ctx.control in ready:
                 msg = decode(ctx.control.recv())

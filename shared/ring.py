@@ -153,6 +153,26 @@ class FrameRing:
             raise SlotOverwritten(f"slot {slot} was overwritten while being read")
         return index, stamp, images
 
+    def view(self, slot: int, generation: int) -> tuple[int, float, list[np.ndarray]]:
+        """Read-only views of the frame in ``slot`` (no copy) if it holds ``generation`` now.
+
+        The writer may overwrite the slot under the views at any time: whatever is computed from
+        them is valid only if ``holds(slot, generation)`` is still true after it (the seqlock's
+        second check, done by the caller once it is finished with the pixels)."""
+        if not 0 <= slot < self.layout.n_slots:
+            raise InputError(f"ring {self.name}", f"slot {slot} out of range 0..{self.layout.n_slots - 1}")
+        rec = self.slots[slot:slot + 1]
+        if int(rec["generation"][0]) != generation:
+            raise SlotOverwritten(f"slot {slot} holds generation {int(rec['generation'][0])}, wanted {generation}")
+        images = [self.pixels[slot, k] for k in range(self.layout.n_images)]
+        for img in images:
+            img.flags.writeable = False   # the views only read another actor's slot
+        return int(rec["index"][0]), float(rec["timestamp"][0]), images
+
+    def holds(self, slot: int, generation: int) -> bool:
+        """True if ``slot`` still holds ``generation`` (complete, not overwritten since)."""
+        return int(self.slots["generation"][slot]) == generation
+
     # --- lifetime -----------------------------------------------------------------
     def close(self) -> None:
         # Views must go before the buffer can be released.

@@ -219,3 +219,38 @@ def test_idle_policy_is_per_thread_and_inherited_by_a_fork():
     assert box == {"set": True, "mine": True, "child": True}
     assert not thread_idle()                    # the caller's thread keeps SCHED_OTHER
     assert not set_thread_idle(True, 2**22 + 12345)   # no such thread: False, no exception
+
+
+@pytest.mark.parametrize("process", [True, False])
+def test_loop_worker_answers_wake_a_poll_on_its_outbox_fd(process):
+    """The loop-closing actor blocks on ``outbox_fd`` (actors.runtime ``wait_fds``) instead of
+    polling the queue: the worker process's first answer must make that fd readable; a thread
+    worker has no fd and the actor keeps polling it (``next_tick_s`` = OUTBOX_POLL_S)."""
+    import zmq
+
+    from actors.loop_closing import OUTBOX_POLL_S, LoopClosingActor
+    from canopy.loop.closer import LoopCloser
+    from canopy.loop.params import LoopParams
+    from canopy.loop.worker import LoopWorker
+    from shared.types import StereoCalibration
+
+    calib = StereoCalibration(fx=450.0, fy=450.0, cx=376.0, cy=240.0, baseline=0.11, width=752, height=480)
+    worker = LoopWorker(LoopCloser(calib, LoopParams(), None), None, niceness=0, process=process)
+    actor = LoopClosingActor({"params": LoopParams()})
+    actor.worker = worker
+    if not process:
+        assert worker.outbox_fd() is None and actor.wait_fds() == []
+        assert actor.next_tick_s() == OUTBOX_POLL_S
+        return
+    fd = worker.outbox_fd()
+    assert actor.wait_fds() == [fd] and actor.next_tick_s() is None   # nothing yet: block
+    poller = zmq.Poller()
+    poller.register(fd, zmq.POLLIN)
+    assert poller.poll(0) == []
+    worker.start()
+    try:
+        assert poller.poll(30_000) == [(fd, zmq.POLLIN)]   # the worker's start-up "extra"
+        assert actor.next_tick_s() == 0.0
+        assert worker.outbox.get(timeout=5)[0] == "extra"
+    finally:
+        worker.stop()

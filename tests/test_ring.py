@@ -41,6 +41,27 @@ def test_overwritten_slot_is_detected(ring):
         ring.read(slot, gen)
 
 
+def test_view_reads_in_place_and_holds_tells_an_overwrite(ring):
+    """The enhancement actor reads the raw slot through ``view`` (no copy) and keeps what it
+    computed only if ``holds`` is still true afterwards."""
+    reader = FrameRing.attach(ring.name)
+    slot, gen = ring.write(7, 0.5, _pair(10))
+    index, stamp, (left, right) = reader.view(slot, gen)
+    assert (index, stamp) == (7, 0.5) and left[0, 0] == 10 and right[0, 0] == 245
+    assert not left.flags.writeable            # another actor's slot: read only
+    assert reader.holds(slot, gen)
+    for i in range(3):                         # a whole ring later the slot holds another frame
+        ring.write(i + 8, 0.0, _pair(20))
+    assert left[0, 0] == 20                    # a view, not a copy: it sees the overwrite ...
+    assert not reader.holds(slot, gen)         # ... and holds() says so
+    with pytest.raises(SlotOverwritten):
+        reader.view(slot, gen)
+    with pytest.raises(InputError, match="out of range"):
+        reader.view(3, gen)
+    del left, right
+    reader.close()
+
+
 def test_wrong_image_size_names_the_frame(ring):
     with pytest.raises(InputError, match="frame 9"):
         ring.write(9, 0.0, [np.zeros((10, 10), np.uint8)] * 2)

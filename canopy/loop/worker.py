@@ -148,6 +148,12 @@ class LoopWorker:
         if not self.process and self._ba is not None:
             self._stop_ba()
 
+    def outbox_fd(self) -> int | None:
+        """The file descriptor that turns readable when the worker process puts an answer in
+        ``outbox`` (a multiprocessing queue is a pipe), so the actor can block on it instead of
+        polling; None for a thread worker (a ``queue.Queue`` has none)."""
+        return self.outbox._reader.fileno() if self.process else None
+
     def alive(self) -> bool:
         return self._runner is not None and self._runner.is_alive()
 
