@@ -15,7 +15,7 @@ from canopy.degrade import NOISE_LEVELS, DegradeParams, degrade_image, ray_lengt
 from canopy.enhance.noise import estimate_noise
 from canopy.frontend.cell_extractor import CellExtractor
 from canopy.frontend.features import OrbExtractor
-from canopy.frontend.noisy_features import NoiseGatedExtractor, tracking_extractor
+from canopy.frontend.noisy_features import NoiseGatedCellFallback, NoiseGatedExtractor, tracking_extractor
 from canopy.frontend.params import TrackingParams
 from canopy.frontend.track_health import image_noise_sigma
 from canopy.synthetic import SequenceGenerator, resolve_params
@@ -120,3 +120,13 @@ def test_bad_settings_and_input_are_refused():
     gate = NoiseGatedExtractor(params(), responses=False)
     with pytest.raises(ValueError, match="image"):
         gate.extract(np.zeros((4, 4, 3), np.uint8))
+
+
+def test_both_noise_gates_name_themselves_on_a_bad_image():
+    colour = np.zeros((40, 60, 3), np.uint8)
+    presets = NoiseGatedExtractor(TrackingParams(noisy_extractor_sigma=4.0, noisy_extractor_robust=True))
+    with pytest.raises(ValueError, match="NoiseGatedExtractor.extract: image must be a non-empty 2-D uint8"):
+        presets.extract(colour)
+    kitti = NoiseGatedCellFallback(TrackingParams(extractor="cells", cell_fallback_noisy_sigma=2.5))
+    with pytest.raises(ValueError, match=r"NoiseGatedCellFallback.extract: .* got shape \(40, 60, 3\)"):
+        kitti.extract(colour)

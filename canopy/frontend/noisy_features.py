@@ -99,6 +99,24 @@ def refinement_pair(left_img: np.ndarray, right_img: np.ndarray, params: Trackin
     return blur(left_img), blur(right_img), sigma
 
 
+def robust_noise_gate(image: np.ndarray, min_robust_sigma: float, noise_sigma: float | None,
+                      who: str) -> tuple[float, float | None]:
+    """The two noise gates' shared measurement: (the image's robust sigma, its mean sigma), the mean
+    (Immerkær, ``track_health.image_noise_sigma``: texture + noise) only when the robust one
+    (``estimate_noise``, rows_fraction 0.5, the stereo refinement's estimator: noise alone) reaches
+    ``min_robust_sigma``, else None. ``noise_sigma``: the mean sigma when the tracker measured it.
+    Their difference is the texture excess both gates test. ``who`` names the caller in the error
+    for an image that is not a non-empty 2-D uint8 grey image."""
+    img = np.asarray(image) if image is not None else None
+    if img is None or img.ndim != 2 or img.dtype != np.uint8 or img.size == 0:
+        raise ValueError(f"{who}: image must be a non-empty 2-D uint8 grey image, got "
+                         + ("None" if img is None else f"shape {img.shape} dtype {img.dtype}"))
+    robust = estimate_noise(img, rows_fraction=0.5)
+    if robust < min_robust_sigma:
+        return robust, None
+    return robust, image_noise_sigma(img) if noise_sigma is None else float(noise_sigma)
+
+
 class NoiseGatedExtractor:
     """cv2.ORB (``OrbExtractor``) on clean images, ORB-SLAM's per-cell extraction (``CellExtractor``,
     its fallback threshold at ``cell_fallback_noise_factor`` x the noise sigma) on images whose
@@ -174,14 +192,10 @@ class NoiseGatedExtractor:
         if not p.noisy_extractor_robust:
             sigma = image_noise_sigma(image) if noise_sigma is None else float(noise_sigma)
             return sigma if sigma >= p.noisy_extractor_sigma else None
-        img = np.asarray(image) if image is not None else None
-        if img is None or img.ndim != 2 or img.dtype != np.uint8 or img.size == 0:
-            raise ValueError("NoiseGatedExtractor.extract: image must be a non-empty 2-D uint8 grey image, got "
-                             + ("None" if img is None else f"shape {img.shape} dtype {img.dtype}"))
-        robust = self.last_robust_sigma = estimate_noise(img, rows_fraction=0.5)
-        if robust < p.noisy_extractor_sigma:
+        robust, sigma = robust_noise_gate(image, p.noisy_extractor_sigma, noise_sigma, "NoiseGatedExtractor.extract")
+        self.last_robust_sigma = robust
+        if sigma is None:
             return None
-        sigma = image_noise_sigma(img) if noise_sigma is None else float(noise_sigma)
         if p.noisy_extractor_max_texture > 0 and sigma - robust >= p.noisy_extractor_max_texture:
             return None
         return sigma
@@ -233,15 +247,12 @@ class NoiseGatedCellFallback:
         ext = self.clean
         self.last_robust_sigma = None
         if fallback_threshold is None:
-            img = np.asarray(image) if image is not None else None
-            if img is None or img.ndim != 2 or img.dtype != np.uint8 or img.size == 0:
-                raise ValueError("NoiseGatedCellFallback.extract: image must be a non-empty 2-D uint8 grey "
-                                 "image, got " + ("None" if img is None else f"shape {img.shape} dtype {img.dtype}"))
-            robust = self.last_robust_sigma = estimate_noise(img, rows_fraction=0.5)
-            if robust >= self.params.cell_fallback_noisy_sigma:
-                if noise_sigma is None:  # the fallback floor's sigma, measured once for both tests
-                    noise_sigma = image_noise_sigma(img)
-                if float(noise_sigma) - robust >= self.params.cell_fallback_noisy_min_texture:
+            robust, sigma = robust_noise_gate(image, self.params.cell_fallback_noisy_sigma, noise_sigma,
+                                              "NoiseGatedCellFallback.extract")
+            self.last_robust_sigma = robust
+            if sigma is not None:
+                noise_sigma = sigma  # the fallback floor's sigma, measured once for both tests
+                if sigma - robust >= self.params.cell_fallback_noisy_min_texture:
                     ext = self.noisy
         self.last_used = "noisy" if ext is self.noisy else "clean"
         features = ext.extract(image, fast_threshold, fallback_threshold, min_keypoints, noise_sigma=noise_sigma)
