@@ -48,12 +48,12 @@ def collect(path: str, n: int, step: int, sets: list[str]) -> np.ndarray:
         lo = cv2.erode(exact, np.ones((5, 5), np.uint8))
         hi = cv2.dilate(exact, np.ones((5, 5), np.uint8))
         rows.append(np.column_stack([np.full(len(idx), i), np.full(len(idx), len(left.uv)), left.octave[idx],
-                                     stereo.depth[idx], exact[y, x], lo[y, x], hi[y, x]]))
+                                     stereo.depth[idx], exact[y, x], lo[y, x], hi[y, x], uv[:, 1]]))
     return np.concatenate(rows), fb
 
 
 def summarise(name: str, r: np.ndarray, fb: float) -> None:
-    f, nl, octv, z, zt, zlo, zhi = r.T
+    f, nl, octv, z, zt, zlo, zhi, v = r.T
     frames = np.unique(f)
     err = z / zt - 1.0
     surface = np.isfinite(zhi) & (zhi < 1.05 * zlo)
@@ -65,6 +65,12 @@ def summarise(name: str, r: np.ndarray, fb: float) -> None:
           f"|dd| med near {np.median(dd[near]):.3f} px (n {near.sum() / len(frames):.0f}/fr), "
           f"far {np.median(dd[far]) if far.any() else np.nan:.3f} px (n {far.sum() / len(frames):.0f}/fr), "
           f"surface |dd|>1px {np.mean(dd[surface] > 1):.1%}")
+    # signed disparity error (estimated - exact, px) of the surface points per 80-px image band, top to
+    # bottom: a bias that changes with the image row tilts the map (pitch)
+    sd = fb / z - fb / np.where(np.isfinite(zt), zt, np.inf)
+    bands = [f"{np.median(sd[m]):+.3f}({m.sum()})" if m.sum() > 20 else "   -   "
+             for m in (surface & (v >= a) & (v < a + 80) for a in range(0, 480, 80))]
+    print("   signed dd median per 80-px band (n):", " ".join(bands))
 
 
 if __name__ == "__main__":
