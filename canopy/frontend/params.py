@@ -303,6 +303,14 @@ class TrackingParams:
     # row) get the per-cell extractor; noisy, textured ones keep cv2.ORB. 0: no texture test.
     noisy_extractor_robust: bool = False
     noisy_extractor_max_texture: float = 0.0
+    # Stereo fill-in (canopy.frontend.stereo_fill): the left keypoints the descriptor matcher leaves
+    # unmatched get a right column by LK flow (the right image's FAST misses half the far,
+    # low-contrast corners of a hazy frame) on frames whose robust noise sigma is in
+    # [stereo_fill_min_sigma, stereo_fill_max_sigma) (max 0: no upper bound). False: off.
+    stereo_fill: bool = False
+    stereo_fill_min_sigma: float = 0.0
+    stereo_fill_max_sigma: float = 0.0
+    stereo_fill_raw_flow: bool = False   # the flow on the raw pair (False: the refinement's pair)
 
     def disparity_offset_for(self, extractor: str) -> float:
         """The calibrated disparity offset for keypoints found by ``extractor`` (Features.extractor)."""
@@ -330,6 +338,8 @@ class TrackingParams:
         need(self.cell_fallback_noisy_sigma >= 0, "cell_fallback_noisy_sigma", "must be >= 0 (0: off)")
         need(self.cell_fallback_noise_factor_noisy >= 0, "cell_fallback_noise_factor_noisy", "must be >= 0")
         need(self.cell_fallback_noisy_min_texture >= 0, "cell_fallback_noisy_min_texture", "must be >= 0 (0: no test)")
+        need(self.stereo_fill_min_sigma >= 0, "stereo_fill_min_sigma", "must be >= 0")
+        need(self.stereo_fill_max_sigma >= 0, "stereo_fill_max_sigma", "must be >= 0 (0: no upper bound)")
         need(self.noisy_extractor_max_texture >= 0, "noisy_extractor_max_texture", "must be >= 0 (0: no test)")
         need(self.noisy_extractor_max_texture == 0 or self.noisy_extractor_robust, "noisy_extractor_max_texture",
              "needs noisy_extractor_robust: true (the excess is mean - robust sigma)")
