@@ -39,24 +39,41 @@ def _matches(params, left_img, right_img, calib):
     return fl, match_stereo(fl, fr, left_img, right_img, calib, params)
 
 
-def _hazy_pair(frame_index: int):
+def _hazy_pair(frame_index: int, level: str = "low"):
     src = open_source("kitti", KITTI)
     f = src.frame(frame_index)
     ray = ray_length(depth_from_stereo(f.left, f.right, src.calibration), src.calibration)
-    cell = DegradeParams(mode="haze+noise", beta=0.06, full_well=NOISE_LEVELS["low"][0],
-                         read_noise=NOISE_LEVELS["low"][1])
+    cell = DegradeParams(mode="haze+noise", beta=0.06, full_well=NOISE_LEVELS[level][0],
+                         read_noise=NOISE_LEVELS[level][1])
     return src, f, degrade_image(f.left, cell, ray, rng=0), degrade_image(f.right, cell, ray, rng=1)
 
 
-def test_off_or_outside_the_noise_band_is_the_descriptor_matcher():
+RULE = dict(stereo_fill=True, stereo_fill_max_sigma=4.0, stereo_fill_max_texture=2.15)  # configs/kitti.yaml
+
+
+def _noise_only(image: np.ndarray, level: str, seed: int) -> np.ndarray:
+    cell = DegradeParams(mode="noise", full_well=NOISE_LEVELS[level][0], read_noise=NOISE_LEVELS[level][1])
+    return degrade_image(image, cell, rng=seed)
+
+
+@pytest.mark.parametrize("case", ["clean", "low-noise sensor, no haze", "noisy sensor, haze"])
+def test_off_or_outside_the_rule_is_the_descriptor_matcher(case):
+    """Clean and noise-only frames keep their texture (excess above the gate), the noisy sensor's
+    hazy frame is above the sigma band: each gets exactly the descriptor matcher's matches."""
     src = open_source("kitti", KITTI)
     f = src.frame(20)
+    if case == "clean":
+        left, right = f.left, f.right
+    elif case.startswith("low"):
+        left, right = _noise_only(f.left, "low", 0), _noise_only(f.right, "low", 1)
+    else:
+        _, _, left, right = _hazy_pair(20, "high")
     off = _params()
-    fl, base = _matches(off, f.left, f.right, src.calibration)
-    assert not fill_active(fl, off)
-    band = _params(stereo_fill=True, stereo_fill_min_sigma=2.5, stereo_fill_max_sigma=4.0)
-    assert fl.robust_noise_sigma < 2.5                   # clean KITTI measures ~1.8: outside the band
-    _, same = _matches(band, f.left, f.right, src.calibration)
+    fl, base = _matches(off, left, right, src.calibration)
+    assert not fill_active(fl, off, left)
+    on = _params(**RULE)
+    assert not fill_active(fl, on, left)
+    _, same = _matches(on, left, right, src.calibration)
     np.testing.assert_array_equal(same.u_right, base.u_right)
     np.testing.assert_array_equal(same.depth, base.depth)
 
@@ -65,9 +82,10 @@ def test_fill_recovers_far_stereo_points_of_a_hazy_pair():
     src, clean, left, right = _hazy_pair(20)
     calib = src.calibration
     off = _params()
-    on = _params(stereo_fill=True, stereo_fill_min_sigma=2.5, stereo_fill_max_sigma=4.0)
+    on = _params(**RULE)
     fl, base = _matches(off, left, right, calib)
     assert 2.5 <= fl.robust_noise_sigma < 4.0            # the low-noise sensor: inside the band
+    assert fill_active(fl, on, left)                     # and haze flattened the texture
     fl2, filled = _matches(on, left, right, calib)
     np.testing.assert_array_equal(fl2.uv, fl.uv)         # same keypoints
     kept = base.valid
@@ -92,7 +110,7 @@ def test_fill_recovers_far_stereo_points_of_a_hazy_pair():
 
 
 def test_bad_inputs_are_refused_by_name():
-    for bad in ({"stereo_fill_min_sigma": -1.0}, {"stereo_fill_max_sigma": -0.5}):
+    for bad in ({"stereo_fill_min_sigma": -1.0}, {"stereo_fill_max_sigma": -0.5}, {"stereo_fill_max_texture": -2.0}):
         with pytest.raises(ConfigError, match=next(iter(bad))):
             _params(**bad).validate()
     src = open_source("kitti", KITTI)

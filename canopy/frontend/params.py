@@ -310,6 +310,7 @@ class TrackingParams:
     stereo_fill: bool = False
     stereo_fill_min_sigma: float = 0.0
     stereo_fill_max_sigma: float = 0.0
+    stereo_fill_max_texture: float = 0.0  # ... and texture excess (mean - robust sigma) below this (0: no test)
     stereo_fill_raw_flow: bool = False   # the flow on the raw pair (False: the refinement's pair)
 
     def disparity_offset_for(self, extractor: str) -> float:
@@ -340,6 +341,7 @@ class TrackingParams:
         need(self.cell_fallback_noisy_min_texture >= 0, "cell_fallback_noisy_min_texture", "must be >= 0 (0: no test)")
         need(self.stereo_fill_min_sigma >= 0, "stereo_fill_min_sigma", "must be >= 0")
         need(self.stereo_fill_max_sigma >= 0, "stereo_fill_max_sigma", "must be >= 0 (0: no upper bound)")
+        need(self.stereo_fill_max_texture >= 0, "stereo_fill_max_texture", "must be >= 0 (0: no test)")
         need(self.noisy_extractor_max_texture >= 0, "noisy_extractor_max_texture", "must be >= 0 (0: no test)")
         need(self.noisy_extractor_max_texture == 0 or self.noisy_extractor_robust, "noisy_extractor_max_texture",
              "needs noisy_extractor_robust: true (the excess is mean - robust sigma)")

@@ -25,18 +25,36 @@ from canopy.frontend.noisy_features import refinement_pair
 from canopy.frontend.params import TrackingParams
 from canopy.frontend.stereo import StereoMatches, refine_and_accept
 from canopy.frontend.stereo_flow import flow_right_columns
+from canopy.frontend.track_health import image_noise_sigma
 from shared.types import StereoCalibration
 
 
-def fill_active(left: Features, params: TrackingParams) -> bool:
-    """True when this frame's unmatched keypoints get the flow fill-in."""
+def fill_active(left: Features, params: TrackingParams, left_img: np.ndarray | None = None,
+                noise_sigma: float | None = None) -> bool:
+    """True when this frame's unmatched keypoints get the flow fill-in: ``stereo_fill`` on, the
+    robust noise sigma the extractor measured (``Features.robust_noise_sigma``) in
+    [``stereo_fill_min_sigma``, ``stereo_fill_max_sigma``), and with ``stereo_fill_max_texture`` > 0
+    the texture excess (``noise_sigma`` - robust sigma, the mean |Laplacian| estimate
+    ``track_health.image_noise_sigma`` minus the median one; measured on ``left_img`` when
+    ``noise_sigma`` is None) below it: haze flattens the texture (KITTI 0.2-1.9 grey levels at beta
+    0.03-0.06, clean 3.4-4.5, the noise-only cells 2.4-4.1; canopy.frontend.noisy_features).
+    Frames without a robust sigma (KITTI: those the enhancement changed) get no fill-in unless the
+    band is unbounded."""
     if not params.stereo_fill:
         return False
     sig = left.robust_noise_sigma
-    if sig is None:  # no estimate: only an unbounded rule fires
-        return params.stereo_fill_min_sigma <= 0 and params.stereo_fill_max_sigma <= 0
+    if sig is None:
+        return params.stereo_fill_min_sigma <= 0 and params.stereo_fill_max_sigma <= 0 and params.stereo_fill_max_texture <= 0
     top = params.stereo_fill_max_sigma
-    return sig >= params.stereo_fill_min_sigma and (top <= 0 or sig < top)
+    if sig < params.stereo_fill_min_sigma or (top > 0 and sig >= top):
+        return False
+    if params.stereo_fill_max_texture <= 0:
+        return True
+    if noise_sigma is None:
+        if left_img is None:
+            raise ValueError("fill_active: stereo_fill_max_texture needs noise_sigma or left_img")
+        noise_sigma = image_noise_sigma(left_img)
+    return float(noise_sigma) - sig < params.stereo_fill_max_texture
 
 
 def fill_unmatched_by_flow(matches: StereoMatches, left: Features, left_img: np.ndarray, right_img: np.ndarray,
