@@ -39,7 +39,10 @@ def test_frame_after_initialisation_is_tracked_by_appearance_matches(noise):
     src = open_source("kitti", KITTI, max_frames=2)
     frames = [_hazy_pair(src, i, noise) for i in (0, 1)]
     truth = src.ground_truth.poses
-    p = replace(load_run_config("kitti").tracking, parallel_extraction=False, parallel_stereo=False)
+    # the stereo fill-in off (configs/kitti.yaml has it on): with it the low-noise hazy frame 0 gets
+    # twice the stereo points, and frame 1 finds its pose by RANSAC without the retry this tests
+    p = replace(load_run_config("kitti").tracking, parallel_extraction=False, parallel_stereo=False,
+                stereo_fill=False)
     results = {}
     for retry in (False, True):
         tracker = Tracker(src.calibration, replace(p, appearance_retry=retry))

@@ -51,6 +51,12 @@ def _hazy_pair(frame_index: int, level: str = "low"):
 RULE = dict(stereo_fill=True, stereo_fill_max_sigma=4.0, stereo_fill_max_texture=2.15)  # configs/kitti.yaml
 
 
+def test_kitti_config_has_the_rule():
+    t = load_run_config("kitti").tracking
+    assert (t.stereo_fill, t.stereo_fill_min_sigma, t.stereo_fill_max_sigma, t.stereo_fill_max_texture) == \
+        (True, 0.0, 4.0, 2.15)
+
+
 def _noise_only(image: np.ndarray, level: str, seed: int) -> np.ndarray:
     cell = DegradeParams(mode="noise", full_well=NOISE_LEVELS[level][0], read_noise=NOISE_LEVELS[level][1])
     return degrade_image(image, cell, rng=seed)
@@ -68,7 +74,7 @@ def test_off_or_outside_the_rule_is_the_descriptor_matcher(case):
         left, right = _noise_only(f.left, "low", 0), _noise_only(f.right, "low", 1)
     else:
         _, _, left, right = _hazy_pair(20, "high")
-    off = _params()
+    off = _params(stereo_fill=False)
     fl, base = _matches(off, left, right, src.calibration)
     assert not fill_active(fl, off, left)
     on = _params(**RULE)
@@ -81,7 +87,7 @@ def test_off_or_outside_the_rule_is_the_descriptor_matcher(case):
 def test_fill_recovers_far_stereo_points_of_a_hazy_pair():
     src, clean, left, right = _hazy_pair(20)
     calib = src.calibration
-    off = _params()
+    off = _params(stereo_fill=False)
     on = _params(**RULE)
     fl, base = _matches(off, left, right, calib)
     assert 2.5 <= fl.robust_noise_sigma < 4.0            # the low-noise sensor: inside the band
@@ -116,7 +122,7 @@ def test_bad_inputs_are_refused_by_name():
     src = open_source("kitti", KITTI)
     f = src.frame(0)
     p = _params(stereo_fill=True)
-    fl, _ = _matches(_params(), f.left, f.right, src.calibration)
+    fl, _ = _matches(_params(stereo_fill=False), f.left, f.right, src.calibration)
     short = StereoMatches(np.full(3, -1.0, np.float32), np.full(3, -1.0, np.float32))
     with pytest.raises(ValueError, match="fill_unmatched_by_flow: matches"):
         fill_unmatched_by_flow(short, fl, f.left, f.right, src.calibration, p)

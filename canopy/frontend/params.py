@@ -311,7 +311,6 @@ class TrackingParams:
     stereo_fill_min_sigma: float = 0.0
     stereo_fill_max_sigma: float = 0.0
     stereo_fill_max_texture: float = 0.0  # ... and texture excess (mean - robust sigma) below this (0: no test)
-    stereo_fill_raw_flow: bool = False   # the flow on the raw pair (False: the refinement's pair)
 
     def disparity_offset_for(self, extractor: str) -> float:
         """The calibrated disparity offset for keypoints found by ``extractor`` (Features.extractor)."""

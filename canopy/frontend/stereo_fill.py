@@ -70,8 +70,7 @@ def fill_unmatched_by_flow(matches: StereoMatches, left: Features, left_img: np.
     scale_factors = params.scale_factor ** np.arange(params.n_levels)
     max_disp = params.max_disparity_fraction * calib.width
     ref_left, ref_right, _ = refinement_pair(left_img, right_img, params, left.robust_noise_sigma)
-    fl_left, fl_right = (left_img, right_img) if params.stereo_fill_raw_flow else (ref_left, ref_right)
-    ur_flow, ok = flow_right_columns(fl_left, fl_right, left.uv[todo].astype(np.float64), params, max_disp)
+    ur_flow, ok = flow_right_columns(ref_left, ref_right, left.uv[todo].astype(np.float64), params, max_disp)
     li = todo[ok]
     li, ur, disp = refine_and_accept(ref_left, ref_right, left, li, ur_flow[ok], scale_factors, max_disp,
                                      params, noise_sigma)
