@@ -306,7 +306,9 @@ class TrackingParams:
     # Stereo fill-in (canopy.frontend.stereo_fill): the left keypoints the descriptor matcher leaves
     # unmatched get a right column by LK flow (the right image's FAST misses half the far,
     # low-contrast corners of a hazy frame) on frames whose robust noise sigma is in
-    # [stereo_fill_min_sigma, stereo_fill_max_sigma) (max 0: no upper bound). False: off.
+    # [stereo_fill_min_sigma, stereo_fill_max_sigma) (max 0: no upper bound) and, with
+    # stereo_fill_max_texture > 0, whose texture excess (mean - robust sigma: haze flattens it) is
+    # below that. False: off (docs/notes/s13-haze.md).
     stereo_fill: bool = False
     stereo_fill_min_sigma: float = 0.0
     stereo_fill_max_sigma: float = 0.0

@@ -1,5 +1,5 @@
 """Stereo fill-in by optical flow for the keypoints the descriptor matcher left unmatched
-(``tracking.stereo_fill_sigma``; issue 9's lit hazy cells).
+(``tracking.stereo_fill``; issue 9's lit hazy cells).
 
 On a hazy frame the far half of the image (transmission e^(-beta d): 0.17 at 30 m for beta 0.06 /m)
 keeps its corners only a few noise sigmas above the FAST threshold, so the right image's FAST fires
@@ -13,8 +13,10 @@ The flow matcher (canopy.frontend.stereo_flow: pyramidal LK left -> right on the
 Bouguet 2001, with the forward-backward check of Kalal et al. 2010) needs no right keypoint. Here it
 runs only on the left keypoints the descriptor matcher did not match, and its columns go through the
 same SAD refinement, disparity offset and SAD acceptance (``refine_and_accept``); the descriptor
-matches are kept as they are. It fires on frames whose robust noise sigma (Immerkaer / MAD, the
-refinement's estimator) is at least ``stereo_fill_sigma``.
+matches are kept as they are (the SAD acceptance test's median is the added matches' own). It fires
+on hazy frames whose pair the refinement does not smooth (``fill_active``): on KITTI's noisy sensor
+(robust sigma >= 4, the pair Gaussian-smoothed) it added as many far stereo points but made the
+trajectory worse on every noise draw (docs/notes/s13-haze.md).
 """
 from __future__ import annotations
 
@@ -59,9 +61,10 @@ def fill_active(left: Features, params: TrackingParams, left_img: np.ndarray | N
 
 def fill_unmatched_by_flow(matches: StereoMatches, left: Features, left_img: np.ndarray, right_img: np.ndarray,
                            calib: StereoCalibration, params: TrackingParams,
-                           noise_sigma: float | None = None) -> StereoMatches:
+                           noise_sigma: float | None = None, pyramids=None) -> StereoMatches:
     """``matches`` with the keypoints it leaves unmatched matched by LK flow where the flow and the
-    SAD tests accept them (see the module docstring); the matched ones unchanged."""
+    SAD tests accept them (see the module docstring); the matched ones unchanged. ``pyramids``: the
+    raw pair's ``PairPyramids`` if built ahead (used when the refinement runs on the raw pair)."""
     if len(matches.depth) != len(left):
         raise ValueError(f"fill_unmatched_by_flow: matches has {len(matches.depth)} entries for {len(left)} keypoints")
     todo = np.flatnonzero(~matches.valid)
@@ -73,7 +76,7 @@ def fill_unmatched_by_flow(matches: StereoMatches, left: Features, left_img: np.
     ur_flow, ok = flow_right_columns(ref_left, ref_right, left.uv[todo].astype(np.float64), params, max_disp)
     li = todo[ok]
     li, ur, disp = refine_and_accept(ref_left, ref_right, left, li, ur_flow[ok], scale_factors, max_disp,
-                                     params, noise_sigma)
+                                     params, noise_sigma, pyramids)
     u_right, depth = matches.u_right.copy(), matches.depth.copy()
     u_right[li] = ur
     depth[li] = calib.bf / disp
