@@ -142,6 +142,12 @@ class TrackingParams:
     # (ORB-SLAM's TrackReferenceKeyFrame): the window around a zero-motion prediction holds few right
     # matches when the camera moves fast (KITTI: 1.2 m per frame).
     appearance_retry: bool = False
+    # ... and try the descriptor-only matches *first* (ORB-SLAM runs TrackReferenceKeyFrame whenever
+    # the velocity is empty) on such a frame when its stereo gets the fill-in (stereo_fill below): the
+    # fill-in's far landmarks let the window search around the zero-motion prediction (1.2 m off at
+    # KITTI's speed) hand RANSAC a consensus that fixes the rotation, not the translation (frame 1 of
+    # KITTI haze 0.06 + low-noise sensor 215-314 mm off; docs/notes/s13-haze.md).
+    appearance_first_filled: bool = False
     # Stage 2 (ORB-SLAM TrackLocalMap): re-project the whole local map with the RANSAC pose
     # and search a small circle, then refine the pose on all those matches.
     search_radius_local: float = 4.0    # px at octave 0, scaled by the keypoint's scale

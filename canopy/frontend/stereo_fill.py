@@ -81,3 +81,24 @@ def fill_unmatched_by_flow(matches: StereoMatches, left: Features, left_img: np.
     u_right[li] = ur
     depth[li] = calib.bf / disp
     return StereoMatches(u_right, depth, n_candidates=matches.n_candidates, on_contour=matches.on_contour)
+
+
+def appearance_first_matches(tracker, view, feats: Features, enough: int):
+    """Stage 1 of a frame without a velocity (``tracking.appearance_first_filled``): the
+    descriptor-only matches against the local map (ORB-SLAM's TrackReferenceKeyFrame) when this frame
+    gets the fill-in and they are at least ``enough``, else None (the tracker's window search).
+
+    Why: the fill-in adds far landmarks, and around a zero-motion prediction (the frame after an
+    initialisation, 1.2 m off at KITTI's speed) far points project almost where they are seen: the
+    40 px window matches then hold a RANSAC consensus of far points that fixes the rotation but not
+    the translation (KITTI g1-b0.06-low with the fill-in: frame 1 214-314 mm off on three noise draws,
+    12-18 mm with the descriptor matches first; docs/notes/s13-haze.md). ``tracker``: the Tracker
+    (its ``params``, ``_frame_noise_sigma`` and ``_appearance_matches``)."""
+    sigma = getattr(tracker, "_frame_noise_sigma", None)
+    p = tracker.params
+    if p.stereo_fill_max_texture > 0 and sigma is None:
+        return None  # the texture test needs the tracker's noise figure (fast_noise_factor > 0)
+    if not fill_active(feats, p, None, sigma):
+        return None
+    cand = tracker._appearance_matches(view, feats)
+    return cand if len(cand[1]) >= enough else None
