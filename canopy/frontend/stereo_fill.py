@@ -92,7 +92,7 @@ def appearance_first_matches(tracker, view, feats: Features, enough: int):
     initialisation, 1.2 m off at KITTI's speed) far points project almost where they are seen: the
     40 px window matches then hold a RANSAC consensus of far points that fixes the rotation but not
     the translation (KITTI g1-b0.06-low with the fill-in: frame 1 214-314 mm off on three noise draws,
-    12-18 mm with the descriptor matches first; docs/notes/s13-haze.md). ``tracker``: the Tracker
+    12-16 mm with the descriptor matches first; docs/notes/s13-haze.md). ``tracker``: the Tracker
     (its ``params``, ``_frame_noise_sigma`` and ``_appearance_matches``)."""
     sigma = getattr(tracker, "_frame_noise_sigma", None)
     p = tracker.params
