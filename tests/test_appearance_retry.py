@@ -17,6 +17,8 @@ from canopy.config import load_run_config
 from canopy.degrade import NOISE_LEVELS, DegradeParams, degrade_image, depth_from_stereo, ray_length
 from canopy.frontend import Tracker
 from canopy.frontend.geometry import se3_inv
+from canopy.frontend.matching import as_words
+from canopy.frontend.track_health import image_noise_sigma
 from canopy.sources import open_source
 from shared.types import StereoFrame
 
@@ -39,7 +41,10 @@ def test_frame_after_initialisation_is_tracked_by_appearance_matches(noise):
     src = open_source("kitti", KITTI, max_frames=2)
     frames = [_hazy_pair(src, i, noise) for i in (0, 1)]
     truth = src.ground_truth.poses
-    p = replace(load_run_config("kitti").tracking, parallel_extraction=False, parallel_stereo=False)
+    # the stereo fill-in off (configs/kitti.yaml has it on): with it the low-noise hazy frame 0 gets
+    # twice the stereo points, and frame 1 finds its pose by RANSAC without the retry this tests
+    p = replace(load_run_config("kitti").tracking, parallel_extraction=False, parallel_stereo=False,
+                stereo_fill=False)
     results = {}
     for retry in (False, True):
         tracker = Tracker(src.calibration, replace(p, appearance_retry=retry))
@@ -51,3 +56,28 @@ def test_frame_after_initialisation_is_tracked_by_appearance_matches(noise):
     # a tracked pose, not the prediction: within 5 cm of the truth (the prediction is 1.2 m off)
     err = se3_inv(res.T_world_cam) @ truth[1]
     assert np.linalg.norm(err[:3, 3]) < 0.05
+
+
+def test_a_filled_frame_without_velocity_takes_the_descriptor_matches_first():
+    """tracking.appearance_first_filled (configs/kitti.yaml): on the frame after initialisation of a
+    hazy low-noise pair (the stereo fill-in fires) stage 1 hands RANSAC the descriptor-only matches
+    (ORB-SLAM's TrackReferenceKeyFrame), and the frame is tracked to the truth; on a clean pair (no
+    fill-in) stage 1 stays the window search."""
+    src = open_source("kitti", KITTI, max_frames=2)
+    truth = src.ground_truth.poses
+    p = replace(load_run_config("kitti").tracking, parallel_extraction=False, parallel_stereo=False)
+    assert p.stereo_fill and p.appearance_first_filled
+    for hazy in (True, False):
+        frames = [_hazy_pair(src, i, "low") for i in (0, 1)] if hazy else [src.frame(i) for i in (0, 1)]
+        tracker = Tracker(src.calibration, p)
+        assert tracker.track(frames[0]).status == "init"
+        feats = tracker.extractor.extract(frames[1].left)
+        tracker._frame_noise_sigma = image_noise_sigma(frames[1].left)
+        view = tracker._map_view()
+        _, r, ids, _ = tracker._initial_matches(np.eye(4), view, feats, as_words(feats.descriptors))
+        _, ra, ida, _ = tracker._appearance_matches(view, feats)
+        same = len(r) == len(ra) and np.array_equal(r, ra) and np.array_equal(ids, ida)
+        assert same == hazy
+        res = tracker.track(frames[1])
+        assert res.status == "ok"
+        assert np.linalg.norm((se3_inv(res.T_world_cam) @ truth[1])[:3, 3]) < 0.05

@@ -15,6 +15,7 @@ from canopy.frontend.map_view import MapView
 from canopy.frontend.matching import knn_match, match_in_window
 from canopy.frontend.pose import refine_pose
 from canopy.frontend.stereo import StereoMatches
+from canopy.frontend.stereo_fill import appearance_first_matches
 
 
 class MapTrackingMixin:
@@ -39,6 +40,10 @@ class MapTrackingMixin:
         """
         p = self.params
         enough = 2 * p.min_inliers
+        if p.appearance_first_filled and not self._velocity_valid and len(view.ids):
+            cand = appearance_first_matches(self, view, feats, enough)  # canopy.frontend.stereo_fill
+            if cand is not None:
+                return cand
         # ORB-SLAM TrackWithMotionModel: the landmarks matched in the previous frame
         pos, words, lids = self._last_matched
         q, r, _ = self._search(T_pred_cw, pos, words, feats, kp_words, p.search_radius)

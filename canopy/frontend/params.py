@@ -142,6 +142,12 @@ class TrackingParams:
     # (ORB-SLAM's TrackReferenceKeyFrame): the window around a zero-motion prediction holds few right
     # matches when the camera moves fast (KITTI: 1.2 m per frame).
     appearance_retry: bool = False
+    # ... and try the descriptor-only matches *first* (ORB-SLAM runs TrackReferenceKeyFrame whenever
+    # the velocity is empty) on such a frame when its stereo gets the fill-in (stereo_fill below): the
+    # fill-in's far landmarks let the window search around the zero-motion prediction (1.2 m off at
+    # KITTI's speed) hand RANSAC a consensus that fixes the rotation, not the translation (frame 1 of
+    # KITTI haze 0.06 + low-noise sensor 215-314 mm off; docs/notes/s13-haze.md).
+    appearance_first_filled: bool = False
     # Stage 2 (ORB-SLAM TrackLocalMap): re-project the whole local map with the RANSAC pose
     # and search a small circle, then refine the pose on all those matches.
     search_radius_local: float = 4.0    # px at octave 0, scaled by the keypoint's scale
@@ -303,6 +309,16 @@ class TrackingParams:
     # row) get the per-cell extractor; noisy, textured ones keep cv2.ORB. 0: no texture test.
     noisy_extractor_robust: bool = False
     noisy_extractor_max_texture: float = 0.0
+    # Stereo fill-in (canopy.frontend.stereo_fill): the left keypoints the descriptor matcher leaves
+    # unmatched get a right column by LK flow (the right image's FAST misses half the far,
+    # low-contrast corners of a hazy frame) on frames whose robust noise sigma is in
+    # [stereo_fill_min_sigma, stereo_fill_max_sigma) (max 0: no upper bound) and, with
+    # stereo_fill_max_texture > 0, whose texture excess (mean - robust sigma: haze flattens it) is
+    # below that. False: off (docs/notes/s13-haze.md).
+    stereo_fill: bool = False
+    stereo_fill_min_sigma: float = 0.0
+    stereo_fill_max_sigma: float = 0.0
+    stereo_fill_max_texture: float = 0.0  # ... and texture excess (mean - robust sigma) below this (0: no test)
 
     def disparity_offset_for(self, extractor: str) -> float:
         """The calibrated disparity offset for keypoints found by ``extractor`` (Features.extractor)."""
@@ -330,6 +346,9 @@ class TrackingParams:
         need(self.cell_fallback_noisy_sigma >= 0, "cell_fallback_noisy_sigma", "must be >= 0 (0: off)")
         need(self.cell_fallback_noise_factor_noisy >= 0, "cell_fallback_noise_factor_noisy", "must be >= 0")
         need(self.cell_fallback_noisy_min_texture >= 0, "cell_fallback_noisy_min_texture", "must be >= 0 (0: no test)")
+        need(self.stereo_fill_min_sigma >= 0, "stereo_fill_min_sigma", "must be >= 0")
+        need(self.stereo_fill_max_sigma >= 0, "stereo_fill_max_sigma", "must be >= 0 (0: no upper bound)")
+        need(self.stereo_fill_max_texture >= 0, "stereo_fill_max_texture", "must be >= 0 (0: no test)")
         need(self.noisy_extractor_max_texture >= 0, "noisy_extractor_max_texture", "must be >= 0 (0: no test)")
         need(self.noisy_extractor_max_texture == 0 or self.noisy_extractor_robust, "noisy_extractor_max_texture",
              "needs noisy_extractor_robust: true (the excess is mean - robust sigma)")

@@ -255,7 +255,12 @@ def match_stereo(left: Features, right: Features | None, left_img: np.ndarray, r
                                      scale_factors, max_disp, params, noise_sigma, pyramids)
     u_right[li] = ur
     depth[li] = calib.bf / disp
-    return StereoMatches(u_right, depth, n_candidates=len(qi))
+    out = StereoMatches(u_right, depth, n_candidates=len(qi))
+    if params.stereo_fill:  # hazy frames: flow for the unmatched keypoints (canopy.frontend.stereo_fill)
+        from canopy.frontend.stereo_fill import fill_active, fill_unmatched_by_flow  # imports this module
+        if fill_active(left, params, left_img, noise_sigma):
+            out = fill_unmatched_by_flow(out, left, left_img, right_img, calib, params, noise_sigma, pyramids)
+    return out
 
 
 def refine_and_accept(ref_left: np.ndarray, ref_right: np.ndarray, left: Features, li: np.ndarray,

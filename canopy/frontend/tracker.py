@@ -172,10 +172,10 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
         timings: dict[str, float] = {}
         t_all = t0 = _clock()
         self._stereo_last = self._stereo_raw = None
-        noise_sigma = None
+        noise_sigma = self._frame_noise_sigma = None
         if self.params.fast_noise_factor > 0:
             # FAST threshold floor from the image noise (track_health): corners from the signal
-            noise_sigma = image_noise_sigma(frame.left)
+            noise_sigma = self._frame_noise_sigma = image_noise_sigma(frame.left)
             floor = int(round(self.params.fast_noise_factor * noise_sigma))
             base = self.params.fast_threshold if fast_threshold is None else int(fast_threshold)
             if floor > base:

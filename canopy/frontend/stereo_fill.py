@@ -1,0 +1,104 @@
+"""Stereo fill-in by optical flow for the keypoints the descriptor matcher left unmatched
+(``tracking.stereo_fill``; issue 9's lit hazy cells).
+
+On a hazy frame the far half of the image (transmission e^(-beta d): 0.17 at 30 m for beta 0.06 /m)
+keeps its corners only a few noise sigmas above the FAST threshold, so the right image's FAST fires
+on a different subset of them: on KITTI's g1-b0.06 cells 31 % of the left keypoints farther than
+20 m have a right keypoint within 2 px of their true column (clean KITTI: 66 %), and 16 % end with a
+stereo match (clean 32 %; docs/notes/s13-haze.md). Without a stereo match a keypoint creates no
+landmark (there is no two-view triangulation here), so the local map loses its far points -- the
+ones that pin rotation -- and the per-frame rotation error grows 2.6x.
+
+The flow matcher (canopy.frontend.stereo_flow: pyramidal LK left -> right on the refinement pair,
+Bouguet 2001, with the forward-backward check of Kalal et al. 2010) needs no right keypoint. Here it
+runs only on the left keypoints the descriptor matcher did not match, and its columns go through the
+same SAD refinement, disparity offset and SAD acceptance (``refine_and_accept``); the descriptor
+matches are kept as they are (the SAD acceptance test's median is the added matches' own). It fires
+on hazy frames whose pair the refinement does not smooth (``fill_active``): on KITTI's noisy sensor
+(robust sigma >= 4, the pair Gaussian-smoothed) it added as many far stereo points but made the
+trajectory worse on every noise draw (docs/notes/s13-haze.md).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from canopy.frontend.features import Features
+from canopy.frontend.noisy_features import refinement_pair
+from canopy.frontend.params import TrackingParams
+from canopy.frontend.stereo import StereoMatches, refine_and_accept
+from canopy.frontend.stereo_flow import flow_right_columns
+from canopy.frontend.track_health import image_noise_sigma
+from shared.types import StereoCalibration
+
+
+def fill_active(left: Features, params: TrackingParams, left_img: np.ndarray | None = None,
+                noise_sigma: float | None = None) -> bool:
+    """True when this frame's unmatched keypoints get the flow fill-in: ``stereo_fill`` on, the
+    robust noise sigma the extractor measured (``Features.robust_noise_sigma``) in
+    [``stereo_fill_min_sigma``, ``stereo_fill_max_sigma``), and with ``stereo_fill_max_texture`` > 0
+    the texture excess (``noise_sigma`` - robust sigma, the mean |Laplacian| estimate
+    ``track_health.image_noise_sigma`` minus the median one; measured on ``left_img`` when
+    ``noise_sigma`` is None) below it: haze flattens the texture (KITTI 0.2-1.9 grey levels at beta
+    0.03-0.06, clean 3.4-4.5, the noise-only cells 2.4-4.1; canopy.frontend.noisy_features).
+    Frames without a robust sigma (KITTI: those the enhancement changed) get no fill-in unless the
+    band is unbounded."""
+    if not params.stereo_fill:
+        return False
+    sig = left.robust_noise_sigma
+    if sig is None:
+        return params.stereo_fill_min_sigma <= 0 and params.stereo_fill_max_sigma <= 0 and params.stereo_fill_max_texture <= 0
+    top = params.stereo_fill_max_sigma
+    if sig < params.stereo_fill_min_sigma or (top > 0 and sig >= top):
+        return False
+    if params.stereo_fill_max_texture <= 0:
+        return True
+    if noise_sigma is None:
+        if left_img is None:
+            raise ValueError("fill_active: stereo_fill_max_texture needs noise_sigma or left_img")
+        noise_sigma = image_noise_sigma(left_img)
+    return float(noise_sigma) - sig < params.stereo_fill_max_texture
+
+
+def fill_unmatched_by_flow(matches: StereoMatches, left: Features, left_img: np.ndarray, right_img: np.ndarray,
+                           calib: StereoCalibration, params: TrackingParams,
+                           noise_sigma: float | None = None, pyramids=None) -> StereoMatches:
+    """``matches`` with the keypoints it leaves unmatched matched by LK flow where the flow and the
+    SAD tests accept them (see the module docstring); the matched ones unchanged. ``pyramids``: the
+    raw pair's ``PairPyramids`` if built ahead (used when the refinement runs on the raw pair)."""
+    if len(matches.depth) != len(left):
+        raise ValueError(f"fill_unmatched_by_flow: matches has {len(matches.depth)} entries for {len(left)} keypoints")
+    todo = np.flatnonzero(~matches.valid)
+    if len(todo) == 0:
+        return matches
+    scale_factors = params.scale_factor ** np.arange(params.n_levels)
+    max_disp = params.max_disparity_fraction * calib.width
+    ref_left, ref_right, _ = refinement_pair(left_img, right_img, params, left.robust_noise_sigma)
+    ur_flow, ok = flow_right_columns(ref_left, ref_right, left.uv[todo].astype(np.float64), params, max_disp)
+    li = todo[ok]
+    li, ur, disp = refine_and_accept(ref_left, ref_right, left, li, ur_flow[ok], scale_factors, max_disp,
+                                     params, noise_sigma, pyramids)
+    u_right, depth = matches.u_right.copy(), matches.depth.copy()
+    u_right[li] = ur
+    depth[li] = calib.bf / disp
+    return StereoMatches(u_right, depth, n_candidates=matches.n_candidates, on_contour=matches.on_contour)
+
+
+def appearance_first_matches(tracker, view, feats: Features, enough: int):
+    """Stage 1 of a frame without a velocity (``tracking.appearance_first_filled``): the
+    descriptor-only matches against the local map (ORB-SLAM's TrackReferenceKeyFrame) when this frame
+    gets the fill-in and they are at least ``enough``, else None (the tracker's window search).
+
+    Why: the fill-in adds far landmarks, and around a zero-motion prediction (the frame after an
+    initialisation, 1.2 m off at KITTI's speed) far points project almost where they are seen: the
+    40 px window matches then hold a RANSAC consensus of far points that fixes the rotation but not
+    the translation (KITTI g1-b0.06-low with the fill-in: frame 1 214-314 mm off on three noise draws,
+    12-16 mm with the descriptor matches first; docs/notes/s13-haze.md). ``tracker``: the Tracker
+    (its ``params``, ``_frame_noise_sigma`` and ``_appearance_matches``)."""
+    sigma = getattr(tracker, "_frame_noise_sigma", None)
+    p = tracker.params
+    if p.stereo_fill_max_texture > 0 and sigma is None:
+        return None  # the texture test needs the tracker's noise figure (fast_noise_factor > 0)
+    if not fill_active(feats, p, None, sigma):
+        return None
+    cand = tracker._appearance_matches(view, feats)
+    return cand if len(cand[1]) >= enough else None
