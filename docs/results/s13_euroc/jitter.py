@@ -58,11 +58,11 @@ trk.keyframe_reasons = kr
 cell = os.environ.get("CELL", "g1-b0.06-low")
 seed = os.environ.get("SEED", "0")
 path = BUNDLED_DATA["euroc"] if cell == "clean" else f"/work/cache/degraded/euroc-all-{cell}-seed{seed}"
-enh, tr = {"method": "auto"}, {}
+enh, tr, mp = {"method": "auto"}, {}, {}
 for s in sys.argv[1:]:
     key, v = s.split("=", 1)
     sec, name = key.split(".")
-    (enh if sec == "enhancement" else tr)[name] = parse_value(v)
+    (enh if sec == "enhancement" else mp if sec == "mapping" else tr)[name] = parse_value(v)
 # the mapper's poses: capture through the returned rows is not enough, so re-run's est comes from run()
 import benchmarks.bench_enhance_diagnose as bed
 cap = {}
@@ -75,7 +75,7 @@ def ape_cap(est, gt, align):
 
 
 bed.ape = ape_cap
-out, rows = run(path, BUNDLED_DATA["euroc"], "euroc", enh, tr, None, stereo=False, kind="euroc")
+out, rows = run(path, BUNDLED_DATA["euroc"], "euroc", enh, tr, None, stereo=False, kind="euroc", map_sets=mp)
 est, gt = cap["est"], cap["gt"]
 online = np.array([f["T"] for f in frames])
 kfs = [i for i, f in enumerate(frames) if f["kf"]]
