@@ -20,7 +20,7 @@ from canopy.frontend.geometry import (PoseJacobianBuffer, _norm, pose_informatio
 from shared.types import StereoCalibration
 
 _MIN_DEPTH = 1e-6
-_CONVERGED_STEP = 1e-6  # |dxi| below which Gauss-Newton has converged (rad / m: 1 µrad, 1 µm)
+_CONVERGED_STEP = 1e-4  # |dxi| below which Gauss-Newton has converged (rad / m: 0.1 mrad, 0.1 mm)
 
 
 @dataclass
