@@ -223,9 +223,9 @@ def test_refine_pose_recovers_exact_pose_and_flags_outliers():
 
 
 def test_refine_pose_stops_at_its_optimum_on_noisy_measurements():
-    """Gauss-Newton stops once an applied step is below pose._CONVERGED_STEP (0.1 mrad / 0.1 mm): on
+    """Gauss-Newton stops once an applied step is below pose._CONVERGED_STEP (10 µrad / 10 µm): on
     a non-zero-residual problem (1 px noise, one plain least-squares round from 0.3 m / 3 deg away)
-    the pose it returns is the optimum to < 1 nm (GN's error after a step of 1e-4 is of its square):
+    the pose it returns is the optimum to < 1 nm (GN's error after a step of 1e-5 is of its square):
     refining on from it moves it by less. (A stop at 1e-3 leaves ~1e-7 m here and fails.)"""
     rng = np.random.default_rng(11)
     T_true = se3_exp(np.array([0.02, -0.05, 0.01, 0.3, -0.1, 0.4]))
