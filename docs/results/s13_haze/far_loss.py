@@ -11,34 +11,17 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[3]))
-from benchmarks.bench_enhance_diagnose import actor_fast, enhance_pair  # noqa: E402
 from canopy.config import load_run_config, parse_value  # noqa: E402
-from canopy.degrade import disparity_sgbm  # noqa: E402
-from canopy.enhance import make_enhancer  # noqa: E402
-from canopy.frontend import Tracker  # noqa: E402
-from canopy.frontend.stereo import match_stereo  # noqa: E402
-from canopy.sources import BUNDLED_DATA, open_source  # noqa: E402
+from far_frames import frames_against_clean  # noqa: E402
 
 cfg = load_run_config("kitti")
 sets = {k.split(".", 1)[1]: parse_value(v) for k, v in (a.split("=", 1) for a in sys.argv[2:])}
 tp = replace(cfg.tracking, **sets)
-src, clean = open_source("kitti", sys.argv[1]), open_source("kitti", BUNDLED_DATA["kitti"])
-enh = make_enhancer(cfg.enhancement)
-tr = Tracker(src.calibration, tp)
-bf = src.calibration.bf
 edges = [0, 10, 20, 30, 1e9]
 tot = np.zeros((3, 4))
-for i in range(0, len(src), 10):
-    fr, c = src.frame(i), clean.frame(i)
-    le, re, info = enhance_pair(enh, fr.left, fr.right)
-    kw = actor_fast(cfg.enhancement, info, le, tp.n_features)
-    fl = tr.extractor.extract(le, kw.get("fast_threshold"), kw.get("fast_fallback"), kw.get("fast_min_keypoints", 0))
-    frr = tr.extractor_right.extract(re, kw.get("fast_threshold"), kw.get("fast_fallback"), kw.get("fast_min_keypoints", 0))
-    st = match_stereo(fl, frr, le, re, tr.calib, tp)
-    ref = disparity_sgbm(c.left, c.right).astype(float)
-    h, w = ref.shape
+for i, tr, fl, frr, st, d in frames_against_clean(sys.argv[1], cfg, tp):
+    bf = tr.calib.bf
     uv = fl.uv
-    d = ref[np.clip(np.rint(uv[:, 1]).astype(int), 0, h - 1), np.clip(np.rint(uv[:, 0]).astype(int), 0, w - 1)]
     z = np.where(d > 0, bf / np.maximum(d, 1e-6), np.nan)
     zb = np.digitize(z, edges[1:-1])
     kp = [int(((zb == b) & np.isfinite(z)).sum()) for b in range(4)]

@@ -11,35 +11,20 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[3]))
-from benchmarks.bench_enhance_diagnose import actor_fast, enhance_pair  # noqa: E402
 from canopy.config import load_run_config  # noqa: E402
-from canopy.degrade import disparity_sgbm  # noqa: E402
-from canopy.enhance import make_enhancer  # noqa: E402
-from canopy.frontend import Tracker  # noqa: E402
 from canopy.frontend.matching import as_words, hamming_pairs  # noqa: E402
-from canopy.frontend.stereo import match_stereo, stereo_candidates  # noqa: E402
-from canopy.sources import BUNDLED_DATA, open_source  # noqa: E402
+from canopy.frontend.stereo import stereo_candidates  # noqa: E402
+from canopy.sources import BUNDLED_DATA  # noqa: E402
+from far_frames import frames_against_clean  # noqa: E402
 
 cfg = load_run_config("kitti")
 tp = cfg.tracking
 path = BUNDLED_DATA["kitti"] if sys.argv[1] == "clean" else sys.argv[1]
-src, clean = open_source("kitti", path), open_source("kitti", BUNDLED_DATA["kitti"])
-enh = make_enhancer(cfg.enhancement)
-tr = Tracker(src.calibration, tp)
-bf = src.calibration.bf
 sf = tp.scale_factor ** np.arange(tp.n_levels)
 n_far = n_has = n_match = 0
 hd_true, hd_best = [], []
-for i in range(0, len(src), 10):
-    fr, c = src.frame(i), clean.frame(i)
-    le, re, info = enhance_pair(enh, fr.left, fr.right)
-    kw = actor_fast(cfg.enhancement, info, le, tp.n_features)
-    fl = tr.extractor.extract(le, kw.get("fast_threshold"), kw.get("fast_fallback"), kw.get("fast_min_keypoints", 0))
-    frr = tr.extractor_right.extract(re, kw.get("fast_threshold"), kw.get("fast_fallback"), kw.get("fast_min_keypoints", 0))
-    st = match_stereo(fl, frr, le, re, tr.calib, tp)
-    ref = disparity_sgbm(c.left, c.right).astype(float)
-    h, w = ref.shape
-    d = ref[np.clip(np.rint(fl.uv[:, 1]).astype(int), 0, h - 1), np.clip(np.rint(fl.uv[:, 0]).astype(int), 0, w - 1)]
+for i, tr, fl, frr, st, d in frames_against_clean(path, cfg, tp):
+    bf = tr.calib.bf
     far = (d > 0) & (d < bf / 20.0)
     qi, rj, _ = stereo_candidates(fl, frr, tp.row_tolerance * sf[fl.octave], tp.octave_tolerance)
     dist = hamming_pairs(as_words(fl.descriptors), as_words(frr.descriptors), qi, rj)
