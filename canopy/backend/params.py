@@ -79,6 +79,7 @@ class MappingParams:
     triangulate_max_hamming: int = 50          # ORB-SLAM TH_LOW
     triangulate_ratio: float = 0.9             # best < ratio x second best in the band
     triangulate_epipolar_chi2: float = 3.841   # px^2 (x sigma^2), 1-DoF 95 %
+    triangulate_min_parallax_deg: float = 0.0  # 0: ORB-SLAM's cos < 0.9998 (~1.15 deg) only
     # a triangulated landmark must be seen by this many keyframes once cull_age_keyframes old
     # (ORB-SLAM MapPointCulling: cnThObs 3 for stereo maps; it starts with two)
     triangulate_min_observations: int = 3
@@ -118,6 +119,7 @@ class MappingParams:
         need(0 <= self.triangulate_max_hamming <= 256, "triangulate_max_hamming", "must be in [0, 256]")
         need(0 < self.triangulate_ratio <= 1, "triangulate_ratio", "must be in (0, 1]")
         need(self.triangulate_epipolar_chi2 > 0, "triangulate_epipolar_chi2", "must be > 0")
+        need(0 <= self.triangulate_min_parallax_deg < 90, "triangulate_min_parallax_deg", "must be in [0, 90)")
         need(self.triangulate_min_observations >= 2, "triangulate_min_observations", "must be >= 2")
         need(self.triangulate_id_base >= 1, "triangulate_id_base", "must be >= 1")
         return self

@@ -42,12 +42,13 @@ class PairGates:
     triangulation_max_hamming: int
     triangulation_ratio: float
     chi2_mono: float
+    min_parallax_deg: float = 0.0   # beyond ORB-SLAM's cos < 0.9998 (~1.15 deg)
 
 
 def pair_gates(params) -> PairGates:
     """``PairGates`` from ``MappingParams`` (mapping.triangulate_*)."""
     return PairGates(params.triangulate_epipolar_chi2, params.triangulate_max_hamming,
-                     params.triangulate_ratio, params.chi2_mono)
+                     params.triangulate_ratio, params.chi2_mono, params.triangulate_min_parallax_deg)
 
 
 def triangulation_partners(rec, keyframes: dict, counts: dict[int, int], n_best: int,
@@ -185,6 +186,10 @@ def match_pair(a, b, calib: StereoCalibration, gates: PairGates, scale: float, p
     u = unique_by_reference(q, best[q], best_d[q])
     ka, kb = ia[q[u]], best[q[u]]
     good, Pw = checked_points(a, b, ka, kb, calib, gates.chi2_mono, scale, pixel_sigma)
+    if gates.min_parallax_deg > 0:   # depth error grows as 1 / parallax: far points need more
+        ra, rb = Pw - a.T_world_cam[:3, 3], Pw - b.T_world_cam[:3, 3]
+        cos = (ra * rb).sum(1) / np.maximum(np.linalg.norm(ra, axis=1) * np.linalg.norm(rb, axis=1), 1e-30)
+        good &= cos < np.cos(np.radians(gates.min_parallax_deg))
     return ka[good], kb[good], Pw[good]
 
 
