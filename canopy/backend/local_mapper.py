@@ -62,6 +62,8 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         self.lines: dict[int, LineLandmark] = {}
         self.n_lines_culled = 0
         self._next_triangulated_id = self.params.triangulate_id_base
+        # keypoints not to triangulate, per keyframe (mapping.triangulate_skip_stereo)
+        self._no_triangulation: dict[int, np.ndarray] = {}
         self.n_triangulated = 0
 
     # ----------------------------------------------------------------- public API
@@ -108,6 +110,12 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         n = len(kf)
         if self.params.triangulate_new_points:
             check_tracker_ids(kf.new_landmark_ids, self.params.triangulate_id_base)
+            if self.params.triangulate_skip_stereo:
+                # a valid stereo depth tracking made no landmark of: on an occluding contour (its
+                # depth mixes fore- and background, and across keyframes the keypoint slides along
+                # the silhouette: no fixed 3-D point) or beyond tracking.max_depth_baselines
+                d = np.asarray(kf.depth, np.float64)
+                self._no_triangulation[kf.index] = np.isfinite(d) & (d > 0) & (np.asarray(kf.new_landmark_ids) < 0)
         rec = Keyframe(kf.index, kf.timestamp, np.asarray(kf.T_world_cam, float).copy(),
                        np.asarray(kf.uv, np.float64), np.asarray(kf.u_right, np.float64),
                        np.asarray(kf.octave, np.int64), np.asarray(kf.descriptors, np.uint8),
@@ -152,7 +160,7 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         partners = triangulation_partners(rec, self.keyframes, self._covisible(rec), p.triangulate_covisible,
                                           p.triangulate_min_baseline * self.calib.baseline)
         for k, ka, kb, Pw in triangulate_with_partners(rec, self.keyframes, partners, self.calib, pair_gates(p),
-                                                       scale, p.pixel_sigma):
+                                                       scale, p.pixel_sigma, self._no_triangulation):
             b = self.keyframes[k]
             ids = self._next_triangulated_id + np.arange(len(ka), dtype=np.int64)
             self._next_triangulated_id += len(ka)

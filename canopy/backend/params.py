@@ -80,6 +80,9 @@ class MappingParams:
     triangulate_ratio: float = 0.9             # best < ratio x second best in the band
     triangulate_epipolar_chi2: float = 3.841   # px^2 (x sigma^2), 1-DoF 95 %
     triangulate_min_parallax_deg: float = 0.0  # 0: ORB-SLAM's cos < 0.9998 (~1.15 deg) only
+    # only keypoints without a valid stereo depth (right match lost or never found) are
+    # triangulated: a stereo depth tracking made no landmark of is an occluding contour's
+    triangulate_skip_stereo: bool = True
     # a triangulated landmark must be seen by this many keyframes once cull_age_keyframes old
     # (ORB-SLAM MapPointCulling: cnThObs 3 for stereo maps; it starts with two)
     triangulate_min_observations: int = 3

@@ -70,17 +70,19 @@ def triangulation_partners(rec, keyframes: dict, counts: dict[int, int], n_best:
 
 
 def triangulate_with_partners(rec, keyframes: dict, partners: list[int], calib: StereoCalibration, gates: PairGates,
-                              scale: float, pixel_sigma: float):
+                              scale: float, pixel_sigma: float, blocked: dict[int, np.ndarray] | None = None):
     """Match and triangulate ``rec``'s free keypoints with each partner's in turn (best partner
     first; a keypoint used by one pair is no longer free for the next, as in ORB-SLAM).
     Returns a list of (partner index, rows of rec, rows of partner, world points (K,3)); the
-    ``landmark`` arrays are not changed (the caller assigns ids), free rows are tracked here."""
-    taken = rec.landmark.copy()
+    ``landmark`` arrays are not changed (the caller assigns ids), free rows are tracked here.
+    ``blocked`` (keyframe index -> bool per keypoint) marks keypoints never to triangulate."""
+    blocked = blocked or {}
+    taken = _free(rec, blocked.get(rec.index))
     out = []
     for k in partners:
         b = keyframes[k]
         view = _FreeView(rec, taken)
-        ka, kb, Pw = match_pair(view, b, calib, gates, scale, pixel_sigma)
+        ka, kb, Pw = match_pair(view, _FreeView(b, _free(b, blocked.get(k))), calib, gates, scale, pixel_sigma)
         if len(ka):
             taken[ka] = 0   # any id >= 0: used
             out.append((k, ka, kb, Pw))
@@ -191,6 +193,14 @@ def match_pair(a, b, calib: StereoCalibration, gates: PairGates, scale: float, p
         cos = (ra * rb).sum(1) / np.maximum(np.linalg.norm(ra, axis=1) * np.linalg.norm(rb, axis=1), 1e-30)
         good &= cos < np.cos(np.radians(gates.min_parallax_deg))
     return ka[good], kb[good], Pw[good]
+
+
+def _free(rec, blocked: np.ndarray | None) -> np.ndarray:
+    """``rec.landmark`` with the blocked keypoints marked used (a copy)."""
+    taken = rec.landmark.copy()
+    if blocked is not None:
+        taken[blocked & (taken < 0)] = 0
+    return taken
 
 
 class _FreeView:
