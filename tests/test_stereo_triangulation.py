@@ -125,13 +125,3 @@ def test_triangulation_params_are_validated():
         MappingParams(triangulate_covisible=0)
     with pytest.raises(ConfigError, match="triangulate_min_observations"):
         MappingParams(triangulate_min_observations=1)
-
-
-def test_stereo_fraction_gate_triangulates_only_keyframes_short_of_stereo():
-    """The scene's keyframes have a stereo depth on 300 of 500 keypoints (0.6)."""
-    closed, _, _ = _run(MappingParams(triangulate_new_points=True, triangulate_max_stereo_fraction=0.5,
-                                      ba_iterations=5), _forward_poses(), np.random.default_rng(3))
-    opened, _, _ = _run(MappingParams(triangulate_new_points=True, triangulate_max_stereo_fraction=0.7,
-                                      ba_iterations=5), _forward_poses(), np.random.default_rng(3))
-    assert closed.n_triangulated == 0
-    assert opened.n_triangulated >= 100

@@ -73,7 +73,7 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         t0 = time.perf_counter()
         rec = self._insert(kf)
         timings["insert"] = _ms(t0)
-        if self.params.triangulate_new_points and self._stereo_fraction(kf) < self.params.triangulate_max_stereo_fraction:
+        if self.params.triangulate_new_points:
             t0 = time.perf_counter()
             self._triangulate_new_points(rec, kf.scale_factor)
             timings["triangulate"] = _ms(t0)
@@ -150,12 +150,6 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         if self.params.use_lines:
             self._insert_lines(kf, rec)
         return rec
-
-    @staticmethod
-    def _stereo_fraction(kf: KeyframeData) -> float:
-        """Share of the keyframe's keypoints with a valid stereo depth (1.0 without keypoints)."""
-        d = np.asarray(kf.depth, np.float64)
-        return float(np.mean(np.isfinite(d) & (d > 0))) if len(d) else 1.0
 
     def _triangulate_new_points(self, rec: Keyframe, scale: float) -> None:
         """ORB-SLAM CreateNewMapPoints in the stereo map (canopy.backend.triangulation): new

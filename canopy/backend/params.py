@@ -83,11 +83,6 @@ class MappingParams:
     # only keypoints without a valid stereo depth (right match lost or never found) are
     # triangulated: a stereo depth tracking made no landmark of is an occluding contour's
     triangulate_skip_stereo: bool = True
-    # triangulate only for keyframes whose keypoints have a valid stereo depth less often than
-    # this (1.0: always). Triangulation stands in for lost right-image matches: KITTI keyframes
-    # have 28 % clean, 16 % in haze 0.06 + noisy sensor, where it helped on three noise draws
-    # while it cost accuracy where stereo was intact (docs/notes/s14-triangulate.md)
-    triangulate_max_stereo_fraction: float = 1.0
     # a triangulated landmark must be seen by this many keyframes once cull_age_keyframes old
     # (ORB-SLAM MapPointCulling: cnThObs 3 for stereo maps; it starts with two)
     triangulate_min_observations: int = 3
@@ -128,7 +123,6 @@ class MappingParams:
         need(0 < self.triangulate_ratio <= 1, "triangulate_ratio", "must be in (0, 1]")
         need(self.triangulate_epipolar_chi2 > 0, "triangulate_epipolar_chi2", "must be > 0")
         need(0 <= self.triangulate_min_parallax_deg < 90, "triangulate_min_parallax_deg", "must be in [0, 90)")
-        need(0 < self.triangulate_max_stereo_fraction <= 1, "triangulate_max_stereo_fraction", "must be in (0, 1]")
         need(self.triangulate_min_observations >= 2, "triangulate_min_observations", "must be >= 2")
         need(self.triangulate_id_base >= 1, "triangulate_id_base", "must be >= 1")
         return self
