@@ -243,10 +243,6 @@ class TrackingParams:
     # 40-80 noisy matches picks yaw-plus-sideways poses 4-6 deg / 1 m off (docs/notes/s14-darkhaze.md).
     ransac_max_deviation_deg: float = 0.0
     ransac_max_deviation_m: float = 0.0
-    # ... and then: "none" the prediction starts; "stage1" both are refined on the stage-1 matches and
-    # the prediction starts when at least as many support it; "local_map" the same by the inliers of
-    # the local-map search from each (canopy.frontend.motion_check)
-    ransac_deviation_compare: str = "none"
     # FAST threshold floor on noisy images: fast_noise_factor x the image noise sigma (Immerkaer
     # estimate); 0 switches it off. Clean images (the estimate sees fine texture too: 2-6 grey
     # levels on KITTI, EuRoC and the generated sequences) keep fast_threshold.
@@ -413,8 +409,6 @@ class TrackingParams:
         need(self.max_motion_deviation_deg > 0, "max_motion_deviation_deg", "must be > 0")
         need(self.ransac_max_deviation_deg >= 0, "ransac_max_deviation_deg", "must be >= 0 (0: off)")
         need(self.ransac_max_deviation_m >= 0, "ransac_max_deviation_m", "must be >= 0 (0: off)")
-        need(self.ransac_deviation_compare in ("none", "stage1", "local_map"), "ransac_deviation_compare",
-             "must be one of none, stage1, local_map")
         need(self.max_predicted_frames >= 0, "max_predicted_frames", "must be >= 0")
         need(self.fast_noise_factor >= 0, "fast_noise_factor", "must be >= 0")
         need(self.pixel_sigma > 0, "pixel_sigma", "must be > 0")

@@ -354,8 +354,7 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
         lview = self._line_map_view() if lines is not None else None
         from_prediction = False
         if p.ransac_max_deviation_deg > 0 or p.ransac_max_deviation_m > 0:  # canopy.frontend.motion_check
-            T_cw, inliers, from_prediction = ransac_or_prediction(self, T_cw, inliers, T_pred_cw, X, r, feats,
-                                                                  lambda: self._stereo(stereo, timings), view, kp_words)
+            T_cw, inliers, from_prediction = ransac_or_prediction(self, T_cw, inliers, T_pred_cw, X, r, feats)
         if T_cw is None and p.track_from_prediction and self._velocity_valid:  # ORB-SLAM's TrackWithMotionModel
             T_cw, inliers, from_prediction = self._start_from_prediction(T_pred_cw, X, feats.uv[r], inliers)
         if T_cw is None and lview is not None and len(lview):
