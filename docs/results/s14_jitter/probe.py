@@ -1,0 +1,54 @@
+"""Runs docs/results/s13_euroc/jitter.py (same arguments, CELL / SEED env) with optional patches of local mapping,
+to pin down which part of a 3-frame keyframe cadence steadies a still EuRoC camera (docs/notes/s14-jitter.md):
+  NOBA=1     local BA does nothing (keyframes inserted, landmarks created, culled; no landmark or pose refined)
+  NOCORR=1   tracking ignores local BA's keyframe pose corrections
+  NOPOS=1    tracking keeps each landmark's first position (BA's refinements never reach it)
+  MAPTIME=1  prints local mapping's mean stage times per keyframe (insert / window / ba / cull / update), CPU of this process
+Throw-away measurement script, run from the worktree root."""
+import os, runpy, sys
+sys.path.insert(0, os.getcwd())
+import canopy.backend.local_ba as lb
+import canopy.backend.local_mapper as lm
+if os.environ.get("NOBA"):
+    lb.LocalBundleAdjustmentMixin._bundle_adjust = lambda self, *a, **k: None
+import canopy.frontend.tracker_map_view as tmv
+_amu = tmv.TrackerMapViewMixin.apply_map_update
+first_pos = {}
+
+
+def amu(self, update):
+    # NOCORR=1: the tracker ignores local BA's keyframe pose corrections; NOPOS=1: it keeps every
+    # landmark at its creation position (BA's refined positions never reach tracking)
+    if os.environ.get("NOCORR"):
+        update.keyframe_poses = {}
+    if os.environ.get("NOPOS"):
+        import numpy as np
+        pos = np.array(update.positions, float).reshape(-1, 3)
+        for j, i in enumerate(np.asarray(update.landmark_ids).tolist()):
+            if i in first_pos:
+                pos[j] = first_pos[i]
+            else:
+                first_pos[i] = pos[j].copy()
+        update.positions = pos
+    return _amu(self, update)
+
+
+tmv.TrackerMapViewMixin.apply_map_update = amu
+stages = []
+if os.environ.get("MAPTIME"):
+    _ins = lm.LocalMapper.insert_keyframe
+
+    def ins(self, kf):
+        import time
+        c0 = time.thread_time()
+        up = _ins(self, kf)
+        stages.append(dict(self.timings[-1], cpu=(time.thread_time() - c0) * 1e3))
+        return up
+    lm.LocalMapper.insert_keyframe = ins
+sys.argv = ["jitter.py"] + sys.argv[1:]
+runpy.run_path("docs/results/s13_euroc/jitter.py", run_name="__main__")
+if stages:
+    keys = stages[0].keys()
+    print("MAPCPU local mapping CPU %.1f ms per keyframe, %.2f ms per frame (95 frames)" % (
+        sum(s["cpu"] for s in stages) / len(stages), sum(s["cpu"] for s in stages) / 95))
+    print("MAPTIME keyframes %d, mean ms per keyframe: %s" % (len(stages), {k: round(sum(s.get(k, 0) for s in stages) / len(stages), 1) for k in keys}))
