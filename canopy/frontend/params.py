@@ -244,16 +244,6 @@ class TrackingParams:
     entropy_ratio_alpha: float = 0.8
     min_frames_between_keyframes: int = 0
     max_frames_between_keyframes: int = 20
-    # The last frame's stereo points as extra measurements of the final pose refinement, on the
-    # keypoints no map landmark took (ORB-SLAM's visual-odometry points; canopy.frontend.last_frame_points),
-    # at sigma x last_frame_points_sigma_factor (two frames' keypoint noise: sqrt 2). Off: bit-identical.
-    last_frame_points: bool = False
-    last_frame_points_sigma_factor: float = 1.4142135623730951
-    # Every tracked frame's stereo measurements of its inlier landmarks fused into the positions
-    # tracking reads (structure-only BA with the frames' poses fixed; canopy.frontend.landmark_fusion),
-    # the map's position a prior of landmark_fusion_prior_weight x one measurement. Off: bit-identical.
-    landmark_fusion: bool = False
-    landmark_fusion_prior_weight: float = 1.0
     min_tracked_fraction: float = 0.75  # of the reference keyframe's tracked landmarks
     min_new_close_points: int = 70      # ORB-SLAM stereo: insert when few close points tracked
     min_tracked_close: int = 100
@@ -412,8 +402,6 @@ class TrackingParams:
         need(self.max_predicted_frames >= 0, "max_predicted_frames", "must be >= 0")
         need(self.fast_noise_factor >= 0, "fast_noise_factor", "must be >= 0")
         need(self.pixel_sigma > 0, "pixel_sigma", "must be > 0")
-        need(self.landmark_fusion_prior_weight > 0, "landmark_fusion_prior_weight", "must be > 0")
-        need(self.last_frame_points_sigma_factor > 0, "last_frame_points_sigma_factor", "must be > 0")
         need(self.pose_opt_rounds >= 1, "pose_opt_rounds", "must be >= 1")
         need(self.pose_opt_iterations >= 1, "pose_opt_iterations", "must be >= 1")
         need(self.chi2_mono > 0 and self.chi2_stereo > 0, "chi2_mono", "and chi2_stereo must be > 0")

@@ -32,8 +32,6 @@ import numpy as np
 from canopy.frontend.noisy_features import tracking_extractor
 from canopy.frontend.features import Features
 from canopy.frontend.keyframe_policy import entropy_ratio, keyframe_reasons
-from canopy.frontend.landmark_fusion import LandmarkFusion, fuse_frame, fused_view
-from canopy.frontend.last_frame_points import refine_with_last_frame
 from canopy.frontend.geometry import (differential_entropy, pose_information, se3_inv, stereo_pose_jacobian,
                                       transform)
 from canopy.frontend.map_tracking import MapTrackingMixin
@@ -90,8 +88,6 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
         self._stereo_obs_depth = (self.params.stereo_obs_max_depth_baselines * calib.baseline
                                   if self.params.stereo_obs_max_depth_baselines > 0 else np.inf)
         # map view = last update + provisional landmarks of keyframes not yet acknowledged
-        self._landmark_fusion = (LandmarkFusion(self.params.landmark_fusion_prior_weight)
-                                 if self.params.landmark_fusion else None)  # canopy.frontend.landmark_fusion
         self._update_view = MapView()
         self._provisional: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._view = MapView()
@@ -258,8 +254,6 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
         self._update_view.set(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 32), np.uint8))
         self._provisional.clear()
         self._segment_start_kf = frame.index
-        if self._landmark_fusion is not None:
-            self._landmark_fusion.reset()
         self._last_matched = (np.zeros((0, 3)), as_words(np.zeros((0, 32), np.uint8)), np.zeros(0, np.int64))
         if self._lines_on:
             self._line_update_view.set(np.zeros(0, np.int64), np.zeros((0, 2, 3)), np.zeros((0, 32), np.uint8))
@@ -342,8 +336,6 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
         T_pred_cw = se3_inv(self._T_last @ self._velocity)  # constant-velocity prediction
         kp_words = as_words(feats.descriptors)
         view = self._map_view()
-        if self._landmark_fusion is not None:
-            view = fused_view(view, self._landmark_fusion)
 
         t0 = _clock()
         X, r, ids, words = self._initial_matches(T_pred_cw, view, feats, kp_words)
@@ -402,8 +394,6 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
                     est = None
             if est is None:
                 est = self._refine(T_cw, X, r, feats, stereo, inliers=inliers, line_obs=line_obs)
-            if p.last_frame_points and est is not None and line_obs is None:
-                est = refine_with_last_frame(self, est, X, r, feats, stereo, kp_words)  # last_frame_points.py
         stereo = self._stereo(stereo, timings)
         _stage(timings, "track_local_map", t0)  # includes the wait for the worker's stereo (its own stage)
         n_matches = len(r)
@@ -432,8 +422,6 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
         matched_ids[r[good]] = ids[good]
         found_mask = isin_ids(visible_ids, matched_ids[matched_ids >= 0])  # np.isin's booleans, by a table
         self._seen.append((visible_ids, found_mask.astype(np.float64)))
-        if self._landmark_fusion is not None:
-            fuse_frame(self, T_wc, ids, r, inliers, feats, stereo)
 
         # ---- keyframe decision (AGRI §3.2.4, Eq. 6-7 after Kerl et al. 2013) ----
         t0 = _clock()

@@ -55,8 +55,6 @@ class TrackerMapViewMixin:
             # positions (projected uncorrected with the corrected prediction they missed by the whole
             # correction: 62 matches and a 0.37 m frame on the day-loop); those no longer in the map go
             self._loop_epoch_seen = epoch
-            if self._landmark_fusion is not None:  # the fused measurements are in the uncorrected map's frame
-                self._landmark_fusion.reset()
             self._last_matched = _refreshed_matches(self._last_matched, update.landmark_ids, update.positions)
 
     def _map_view(self) -> MapView:

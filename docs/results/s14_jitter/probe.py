@@ -1,4 +1,4 @@
-"""Runs docs/results/s13_euroc/jitter.py (same arguments, CELL / SEED env) with optional patches of local mapping,
+"""Runs docs/results/s14_jitter/jitter.py (a copy of s13_euroc/jitter.py) (same arguments, CELL / SEED env) with optional patches of local mapping,
 to pin down which part of a 3-frame keyframe cadence steadies a still EuRoC camera (docs/notes/s14-jitter.md):
   NOBA=1     local BA does nothing (keyframes inserted, landmarks created, culled; no landmark or pose refined)
   NOCORR=1   tracking ignores local BA's keyframe pose corrections
@@ -34,6 +34,15 @@ def amu(self, update):
 
 
 tmv.TrackerMapViewMixin.apply_map_update = amu
+if os.environ.get("FIXK"):  # FIXK=k: local BA keeps only the k most recent fixed keyframes
+    _lw = lm.LocalMapper._local_window
+
+    def lw(self, rec):
+        local, fixed = _lw(self, rec)
+        first = self._segment_first[rec.segment]
+        keep = sorted(k for k in fixed if k != first)[-int(os.environ["FIXK"]):]
+        return local, sorted(set(keep) | ({first} & set(fixed)))
+    lm.LocalMapper._local_window = lw
 stages = []
 if os.environ.get("MAPTIME"):
     _ins = lm.LocalMapper.insert_keyframe
@@ -46,7 +55,7 @@ if os.environ.get("MAPTIME"):
         return up
     lm.LocalMapper.insert_keyframe = ins
 sys.argv = ["jitter.py"] + sys.argv[1:]
-runpy.run_path("docs/results/s13_euroc/jitter.py", run_name="__main__")
+runpy.run_path("docs/results/s14_jitter/jitter.py", run_name="__main__")
 if stages:
     keys = stages[0].keys()
     print("MAPCPU local mapping CPU %.1f ms per keyframe, %.2f ms per frame (95 frames)" % (
