@@ -51,7 +51,8 @@ if os.environ.get("MAPTIME"):
         import time
         c0 = time.thread_time()
         up = _ins(self, kf)
-        stages.append(dict(self.timings[-1], cpu=(time.thread_time() - c0) * 1e3))
+        stages.append(dict(self.timings[-1], cpu=(time.thread_time() - c0) * 1e3, n_local=len(self.last_window[0]),
+                           n_fixed=len(self.last_window[1])))
         return up
     lm.LocalMapper.insert_keyframe = ins
 sys.argv = ["jitter.py"] + sys.argv[1:]
