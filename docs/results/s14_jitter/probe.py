@@ -61,4 +61,7 @@ if stages:
     keys = stages[0].keys()
     print("MAPCPU local mapping CPU %.1f ms per keyframe, %.2f ms per frame (95 frames)" % (
         sum(s["cpu"] for s in stages) / len(stages), sum(s["cpu"] for s in stages) / 95))
+    third = max(len(stages) // 3, 1)
+    print("MAPCPU per keyframe by thirds of the run: %s ms" % [round(sum(s["cpu"] for s in stages[i:i + third]) / len(stages[i:i + third]), 1)
+                                                            for i in range(0, len(stages), third)])
     print("MAPTIME keyframes %d, mean ms per keyframe: %s" % (len(stages), {k: round(sum(s.get(k, 0) for s in stages) / len(stages), 1) for k in keys}))
