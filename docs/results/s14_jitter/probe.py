@@ -3,6 +3,7 @@ to pin down which part of a 3-frame keyframe cadence steadies a still EuRoC came
   NOBA=1     local BA does nothing (keyframes inserted, landmarks created, culled; no landmark or pose refined)
   NOCORR=1   tracking ignores local BA's keyframe pose corrections
   NOPOS=1    tracking keeps each landmark's first position (BA's refinements never reach it)
+  CULL=1     ORB-SLAM's keyframe culling after each insertion (a probe of bounding local mapping's cost)
   MAPTIME=1  prints local mapping's mean stage times per keyframe (insert / window / ba / cull / update), CPU of this process
 Throw-away measurement script, run from the worktree root."""
 import os, runpy, sys
@@ -43,6 +44,28 @@ if os.environ.get("FIXK"):  # FIXK=k: local BA keeps only the k most recent fixe
         keep = sorted(k for k in fixed if k != first)[-int(os.environ["FIXK"]):]
         return local, sorted(set(keep) | ({first} & set(fixed)))
     lm.LocalMapper._local_window = lw
+if os.environ.get("CULL"):  # CULL=1: ORB-SLAM's KeyFrameCulling after each insertion (90 % of a keyframe's
+    # landmarks seen by >= 3 other keyframes: the keyframe goes; scale test left out; never the segment's first
+    # or the new keyframe)
+    _ins0 = lm.LocalMapper.insert_keyframe
+
+    def ins_cull(self, kf):
+        up = _ins0(self, kf)
+        rec = self.keyframes[kf.index]
+        first = self._segment_first[rec.segment]
+        keep = int(os.environ.get("CULL_KEEP", "1"))  # the newest CULL_KEEP keyframes are never culled
+        for k in sorted(self.keyframes)[:-keep]:
+            kr = self.keyframes[k]
+            if k == first or kr.segment != rec.segment:
+                continue
+            lids = kr.landmark[kr.landmark >= 0].tolist()
+            if lids and sum(len(self.landmarks[i].obs) - 1 >= 3 for i in lids) >= 0.9 * len(lids):
+                for i in lids:
+                    self._remove_observation(i, k)
+                del self.keyframes[k]
+                self.n_kf_culled = getattr(self, "n_kf_culled", 0) + 1
+        return up
+    lm.LocalMapper.insert_keyframe = ins_cull
 stages = []
 if os.environ.get("MAPTIME"):
     _ins = lm.LocalMapper.insert_keyframe
