@@ -26,6 +26,7 @@ import numpy as np
 from canopy.backend.local_ba import LocalBundleAdjustmentMixin
 from canopy.backend.map_store import Keyframe, Landmark, LandmarkStore, LineLandmark, MapStoreAccess, local_map_update
 from canopy.backend.params import MappingParams
+from canopy.backend.still_window import window_neighbours
 from canopy.backend.triangulation import check_tracker_ids, pair_gates, triangulate_with_partners, \
     triangulation_partners
 from canopy.frontend.matching import as_words, _popcount64
@@ -257,7 +258,7 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         neigh = [k for k, c in counts.items() if c >= p.covisibility_min_shared
                  and self.keyframes[k].segment == rec.segment]
         neigh.sort(key=lambda k: (-counts[k], -k))
-        local = [rec.index] + neigh[: p.window_size - 1]
+        local = [rec.index] + window_neighbours(self, rec, neigh)  # neigh[:window_size - 1] unless still_window's option
         local_set = set(local)
         seen = set()
         for k in local:

@@ -13,6 +13,9 @@ CHI2_95_3DOF = 7.815
 @dataclass(frozen=True)
 class MappingParams:
     window_size: int = 8                 # local keyframes optimised by local BA (AGRI §3.3.2)
+    # neighbours whose view is within this many pixels of a keyframe already in the window add no
+    # geometry and stay fixed (canopy.backend.still_window); 0: off (ORB-SLAM's window)
+    window_min_view_change_px: float = 0.0
     covisibility_min_shared: int = 15    # landmarks two keyframes must share to be neighbours
     ba_iterations: int = 10              # Levenberg-Marquardt iterations per BA pass
     ba_passes: int = 2                   # ORB-SLAM: robust pass, drop outliers, refine again
@@ -94,6 +97,7 @@ class MappingParams:
                 raise ConfigError("MappingParams", f"{name} {what} (got {getattr(self, name)!r})")
 
         need(self.window_size >= 2, "window_size", "must be >= 2")
+        need(self.window_min_view_change_px >= 0, "window_min_view_change_px", "must be >= 0")
         need(self.covisibility_min_shared >= 1, "covisibility_min_shared", "must be >= 1")
         need(self.ba_iterations >= 1, "ba_iterations", "must be >= 1")
         need(self.ba_passes >= 1, "ba_passes", "must be >= 1")

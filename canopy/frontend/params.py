@@ -235,6 +235,14 @@ class TrackingParams:
     max_motion_deviation_m: float = 2.0
     max_motion_deviation_deg: float = 20.0
     max_predicted_frames: int = 2
+    # > 0: a RANSAC pose departing from the constant-velocity prediction by more than these
+    # (degrees, metres) is not taken as the start of the refinement; the prediction is, on the
+    # stage-1 matches it explains (ORB-SLAM's TrackWithMotionModel), when it explains at least
+    # min_inliers of them (canopy.frontend.track_health.ransac_departs). A car at 10 Hz changes its
+    # per-frame motion by < 0.25 deg / 16 mm (KITTI 06 ground truth); on dark hazy frames EPnP on
+    # 40-80 noisy matches picks yaw-plus-sideways poses 4-6 deg / 1 m off (docs/notes/s14-darkhaze.md).
+    ransac_max_deviation_deg: float = 0.0
+    ransac_max_deviation_m: float = 0.0
     # FAST threshold floor on noisy images: fast_noise_factor x the image noise sigma (Immerkaer
     # estimate); 0 switches it off. Clean images (the estimate sees fine texture too: 2-6 grey
     # levels on KITTI, EuRoC and the generated sequences) keep fast_threshold.
@@ -399,6 +407,8 @@ class TrackingParams:
         need(0 <= self.min_inlier_fraction < 1, "min_inlier_fraction", "must be in [0, 1)")
         need(self.max_motion_deviation_m > 0, "max_motion_deviation_m", "must be > 0")
         need(self.max_motion_deviation_deg > 0, "max_motion_deviation_deg", "must be > 0")
+        need(self.ransac_max_deviation_deg >= 0, "ransac_max_deviation_deg", "must be >= 0 (0: off)")
+        need(self.ransac_max_deviation_m >= 0, "ransac_max_deviation_m", "must be >= 0 (0: off)")
         need(self.max_predicted_frames >= 0, "max_predicted_frames", "must be >= 0")
         need(self.fast_noise_factor >= 0, "fast_noise_factor", "must be >= 0")
         need(self.pixel_sigma > 0, "pixel_sigma", "must be > 0")

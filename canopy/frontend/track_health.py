@@ -64,3 +64,19 @@ def judge_pose(n_support: int, n_matches: int, T_cw: np.ndarray, T_pred_cw: np.n
         if dt > params.max_motion_deviation_m or dr > params.max_motion_deviation_deg:
             return LOST_INCONSISTENT_MOTION
     return ""
+
+
+def ransac_departs(T_cw: np.ndarray, T_pred_cw: np.ndarray, params) -> bool:
+    """Does a RANSAC pose depart from the constant-velocity prediction by more than the motion
+    model can be wrong (``ransac_max_deviation_deg`` / ``_m``, either one; 0 = that test off)?
+
+    With 40-80 stage-1 matches of which half are right (dark, hazy, noisy frames) EPnP's best
+    minimal set can be a yaw + sideways shift that keeps the near points (all at ~10 m) in place:
+    a rotation by theta moves them as a translation of z * theta does. The local-map search then
+    looks in a small window around that pose and confirms it. The prediction errs only by the
+    change of the vehicle's motion over one frame plus the last frame's error."""
+    max_deg, max_m = params.ransac_max_deviation_deg, params.ransac_max_deviation_m
+    if max_deg <= 0 and max_m <= 0:
+        return False
+    dt, dr = motion_deviation(T_cw, T_pred_cw)
+    return (max_deg > 0 and dr > max_deg) or (max_m > 0 and dt > max_m)

@@ -38,6 +38,7 @@ from canopy.frontend.map_tracking import MapTrackingMixin
 from canopy.frontend.map_view import MapView, seen_counts
 from canopy.frontend.tracker_map_view import TrackerMapViewMixin
 from canopy.frontend.matching import as_words
+from canopy.frontend.motion_check import ransac_or_prediction
 from canopy.frontend.messages import KeyframeData, TrackingResult
 from canopy.frontend.params import TrackingParams
 from canopy.frontend.stereo import StereoMatches
@@ -352,6 +353,8 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
         _stage(timings, "pnp", t0)
         lview = self._line_map_view() if lines is not None else None
         from_prediction = False
+        if p.ransac_max_deviation_deg > 0 or p.ransac_max_deviation_m > 0:  # canopy.frontend.motion_check
+            T_cw, inliers, from_prediction = ransac_or_prediction(self, T_cw, inliers, T_pred_cw, X, r, feats)
         if T_cw is None and p.track_from_prediction and self._velocity_valid:  # ORB-SLAM's TrackWithMotionModel
             T_cw, inliers, from_prediction = self._start_from_prediction(T_pred_cw, X, feats.uv[r], inliers)
         if T_cw is None and lview is not None and len(lview):
