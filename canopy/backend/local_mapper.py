@@ -27,6 +27,8 @@ from canopy.backend.local_ba import LocalBundleAdjustmentMixin
 from canopy.backend.map_store import Keyframe, Landmark, LandmarkStore, LineLandmark, MapStoreAccess, local_map_update
 from canopy.backend.params import MappingParams
 from canopy.backend.still_window import window_neighbours
+from canopy.backend.triangulation import check_tracker_ids, pair_gates, triangulate_with_partners, \
+    triangulation_partners
 from canopy.frontend.matching import as_words, _popcount64
 from canopy.frontend.messages import KeyframeData, LocalMapUpdate
 from canopy.lines import line_coefficients
@@ -60,6 +62,10 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         self.n_culled = 0
         self.lines: dict[int, LineLandmark] = {}
         self.n_lines_culled = 0
+        self._next_triangulated_id = self.params.triangulate_id_base
+        # keypoints not to triangulate, per keyframe (mapping.triangulate_skip_stereo)
+        self._no_triangulation: dict[int, np.ndarray] = {}
+        self.n_triangulated = 0
 
     # ----------------------------------------------------------------- public API
     def insert_keyframe(self, kf: KeyframeData) -> LocalMapUpdate:
@@ -68,6 +74,10 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         t0 = time.perf_counter()
         rec = self._insert(kf)
         timings["insert"] = _ms(t0)
+        if self.params.triangulate_new_points:
+            t0 = time.perf_counter()
+            self._triangulate_new_points(rec, kf.scale_factor)
+            timings["triangulate"] = _ms(t0)
         t0 = time.perf_counter()
         local, fixed = self._local_window(rec)
         self.last_window = (local, fixed)  # for diagnosis (benchmarks/diagnose_drift.py)
@@ -99,6 +109,14 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
             self._segment += 1
             self._segment_first[self._segment] = kf.index
         n = len(kf)
+        if self.params.triangulate_new_points:
+            check_tracker_ids(kf.new_landmark_ids, self.params.triangulate_id_base)
+            if self.params.triangulate_skip_stereo:
+                # a valid stereo depth tracking made no landmark of: on an occluding contour (its
+                # depth mixes fore- and background, and across keyframes the keypoint slides along
+                # the silhouette: no fixed 3-D point) or beyond tracking.max_depth_baselines
+                d = np.asarray(kf.depth, np.float64)
+                self._no_triangulation[kf.index] = np.isfinite(d) & (d > 0) & (np.asarray(kf.new_landmark_ids) < 0)
         rec = Keyframe(kf.index, kf.timestamp, np.asarray(kf.T_world_cam, float).copy(),
                        np.asarray(kf.uv, np.float64), np.asarray(kf.u_right, np.float64),
                        np.asarray(kf.octave, np.int64), np.asarray(kf.descriptors, np.uint8),
@@ -133,6 +151,27 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         if self.params.use_lines:
             self._insert_lines(kf, rec)
         return rec
+
+    def _triangulate_new_points(self, rec: Keyframe, scale: float) -> None:
+        """ORB-SLAM CreateNewMapPoints in the stereo map (canopy.backend.triangulation): new
+        landmarks from rec's free keypoints matched with its best covisible keyframes', each
+        with a monocular observation in both (local BA then weighs them as mono edges, or as
+        stereo ones where the keypoint has a right-image match)."""
+        p = self.params
+        partners = triangulation_partners(rec, self.keyframes, self._covisible(rec), p.triangulate_covisible,
+                                          p.triangulate_min_baseline * self.calib.baseline)
+        for k, ka, kb, Pw in triangulate_with_partners(rec, self.keyframes, partners, self.calib, pair_gates(p),
+                                                       scale, p.pixel_sigma, self._no_triangulation):
+            b = self.keyframes[k]
+            ids = self._next_triangulated_id + np.arange(len(ka), dtype=np.int64)
+            self._next_triangulated_id += len(ka)
+            self.landmarks.add_new([Landmark(lid, None, None, {rec.index: i, k: j}, first_order=rec.order,
+                                             segment=self._segment)
+                                    for lid, i, j in zip(ids.tolist(), ka.tolist(), kb.tolist())],
+                                   Pw, rec.descriptors[ka])
+            rec.landmark[ka] = ids
+            b.landmark[kb] = ids
+            self.n_triangulated += len(ka)
 
     def _insert_lines(self, kf: KeyframeData, rec: Keyframe) -> None:
         """Line observations of existing line landmarks, and new lines from stereo endpoints."""
@@ -247,6 +286,9 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
                 bad.append(lid)
             elif age >= p.cull_age_keyframes and len(lm.obs) < p.min_observations:
                 bad.append(lid)
+            elif p.triangulate_new_points and lid >= p.triangulate_id_base and age >= p.cull_age_keyframes \
+                    and len(lm.obs) < p.triangulate_min_observations:
+                bad.append(lid)   # a triangulated landmark starts with two observations
         for lid in bad:
             self._delete_landmark(lid)
         if p.use_lines:

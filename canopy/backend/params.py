@@ -70,6 +70,26 @@ class MappingParams:
     # 1e-5 stays for points only): Huber-weighted line outliers make the cost creep down by
     # ~1e-4 per iteration for many iterations without moving the estimate measurably
     line_ba_relative_error_tol: float = 1e-3
+    # --- new landmarks triangulated across keyframes (canopy.backend.triangulation) -----
+    # ORB-SLAM LocalMapping::CreateNewMapPoints: the new keyframe's keypoints without a landmark
+    # matched (epipolar band, Hamming best of two) with the free keypoints of its
+    # triangulate_covisible best covisible keyframes at least triangulate_min_baseline x the
+    # rig's baseline away, triangulated and kept when they pass parallax, depth, reprojection and
+    # scale checks. Off: stereo landmarks only, bit-identical.
+    triangulate_new_points: bool = False
+    triangulate_covisible: int = 6
+    triangulate_min_baseline: float = 1.0      # x calib.baseline (ORB-SLAM stereo: baseline < mb skips)
+    triangulate_max_hamming: int = 50          # ORB-SLAM TH_LOW
+    triangulate_ratio: float = 0.9             # best < ratio x second best in the band
+    triangulate_epipolar_chi2: float = 3.841   # px^2 (x sigma^2), 1-DoF 95 %
+    triangulate_min_parallax_deg: float = 0.0  # 0: ORB-SLAM's cos < 0.9998 (~1.15 deg) only
+    # only keypoints without a valid stereo depth (right match lost or never found) are
+    # triangulated: a stereo depth tracking made no landmark of is an occluding contour's
+    triangulate_skip_stereo: bool = True
+    # a triangulated landmark must be seen by this many keyframes once cull_age_keyframes old
+    # (ORB-SLAM MapPointCulling: cnThObs 3 for stereo maps; it starts with two)
+    triangulate_min_observations: int = 3
+    triangulate_id_base: int = 1 << 20         # the mapper's own landmark ids (tracking counts from 0)
 
     def validate(self) -> "MappingParams":
         def need(ok: bool, name: str, what: str) -> None:
@@ -101,6 +121,14 @@ class MappingParams:
         need(self.line_ba_min_keyframes >= 1, "line_ba_min_keyframes", "must be >= 1")
         need(self.line_chi2_gate >= self.chi2_line, "line_chi2_gate", "must be >= chi2_line")
         need(0 < self.line_ba_relative_error_tol < 1, "line_ba_relative_error_tol", "must be in (0, 1)")
+        need(self.triangulate_covisible >= 1, "triangulate_covisible", "must be >= 1")
+        need(self.triangulate_min_baseline >= 0, "triangulate_min_baseline", "must be >= 0")
+        need(0 <= self.triangulate_max_hamming <= 256, "triangulate_max_hamming", "must be in [0, 256]")
+        need(0 < self.triangulate_ratio <= 1, "triangulate_ratio", "must be in (0, 1]")
+        need(self.triangulate_epipolar_chi2 > 0, "triangulate_epipolar_chi2", "must be > 0")
+        need(0 <= self.triangulate_min_parallax_deg < 90, "triangulate_min_parallax_deg", "must be in [0, 90)")
+        need(self.triangulate_min_observations >= 2, "triangulate_min_observations", "must be >= 2")
+        need(self.triangulate_id_base >= 1, "triangulate_id_base", "must be >= 1")
         return self
 
     def __post_init__(self):

@@ -80,6 +80,17 @@ def new_points_between(a, b, calib: StereoCalibration, params: MonoParams, scale
     ka, kb = ia[qa[u]], ib[rb[u]]
     if len(ka) == 0:
         return empty
+    good, Pw = checked_points(a, b, ka, kb, calib, params.chi2_mono, scale, pixel_sigma)
+    return ka[good], kb[good], Pw[good]
+
+
+def checked_points(a, b, ka: np.ndarray, kb: np.ndarray, calib: StereoCalibration, chi2_mono: float, scale: float,
+                   pixel_sigma: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """ORB-SLAM CreateNewMapPoints' tests of matched keypoints ``ka`` of ``a`` / ``kb`` of ``b``:
+    triangulate, then parallax (cos < 0.9998), depth > 0 in both, reprojection within the 2-DoF
+    gate in both, distance ratio following the octave ratio. Returns (good mask, world points)."""
+    Kinv = np.linalg.inv(calib.K)
+    Ta, Tb = se3_inv(a.T_world_cam), se3_inv(b.T_world_cam)
     xa = (np.column_stack([a.uv[ka], np.ones(len(ka))]) @ Kinv.T)[:, :2]
     xb = (np.column_stack([b.uv[kb], np.ones(len(kb))]) @ Kinv.T)[:, :2]
     Pw = triangulate_pairs(Ta, Tb, xa, xb)
@@ -98,9 +109,9 @@ def new_points_between(a, b, calib: StereoCalibration, params: MonoParams, scale
     for P, uv, s in ((Pa, a.uv[ka], sa), (Pb, b.uv[kb], sb)):
         with np.errstate(divide="ignore", invalid="ignore"):
             proj = P[:, :2] / P[:, 2:3] * [calib.fx, calib.fy] + [calib.cx, calib.cy]
-        good &= ((proj - uv) ** 2).sum(1) < params.chi2_mono * s**2
+        good &= ((proj - uv) ** 2).sum(1) < chi2_mono * s**2
     # scale consistency: distance ratio should follow the pyramid-level ratio
     ratio_dist = nb / np.maximum(na, 1e-30)
     ratio_oct = scale ** (a.octave[ka] - b.octave[kb]).astype(float)
     good &= (ratio_dist * _SCALE_CONSISTENCY >= ratio_oct) & (ratio_dist <= ratio_oct * _SCALE_CONSISTENCY)
-    return ka[good], kb[good], Pw[good]
+    return good, Pw
