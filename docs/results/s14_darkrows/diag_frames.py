@@ -87,14 +87,18 @@ def run(path, clean_path, max_frames, enh_sets, track_sets):
         lo = cv2.erode(exact, np.ones((5, 5), np.uint8))[y, x]
         hi = cv2.dilate(exact, np.ones((5, 5), np.uint8))[y, x]
         surf = (lo > 0) & (hi < 1.05 * lo)
-        derr = np.abs(fb / z[surf] - fb / zt[surf]) if surf.any() else np.array([np.nan])
+        dsig = fb / z[surf] - fb / zt[surf] if surf.any() else np.array([np.nan])
+        derr = np.abs(dsig)
+        near_ok = np.abs(dsig) <= 1.0  # the signed bias of the points within 1 px (outliers aside)
         rows.append(dict(i=i, method=info["method"], gamma=info.get("gamma", 1.0), dn_sigma=info["noise_sigma"],
                          raw_sigma=estimate_noise(fr.left, rows_fraction=0.5),
                          enh_sigma=estimate_noise(le, rows_fraction=0.5), mean_raw=float(fr.left.mean()),
                          mean_enh=float(le.mean()), thr=kw.get("fast_threshold") or -1,
                          thr_fb=kw.get("fast_fallback") or -1, kp=len(left.uv), stereo=len(idx),
                          off10=float(off.mean()) if len(idx) else np.nan, d_err=float(np.median(derr)),
-                         d_bad=float(np.mean(derr > 1.0)), inl=int(res.n_inliers), matches=int(res.n_matches),
+                         d_bad=float(np.mean(derr > 1.0)),
+                         d_bias=float(np.mean(dsig[near_ok])) if near_ok.any() else np.nan,
+                         d_rel_pct=float(100 * np.mean(dsig[near_ok] / (fb / zt[surf][near_ok]))) if near_ok.any() else np.nan, inl=int(res.n_inliers), matches=int(res.n_matches),
                          kf=int(bool(res.is_keyframe)), status=res.status))
         if res.is_keyframe and res.keyframe is not None:
             schedule.keyframe_sent(res.keyframe.index, fr.index)
@@ -136,7 +140,7 @@ def main():
         dec[r["method"]] = dec.get(r["method"], 0) + 1
     print(f"ATE {1000 * ate:.3f} mm  decisions {dec}  keyframes {sum(r['kf'] for r in rows)}")
     keys = ["gamma", "dn_sigma", "raw_sigma", "enh_sigma", "mean_raw", "mean_enh", "thr", "thr_fb", "kp", "stereo",
-            "off10", "d_err", "d_bad", "inl", "matches", "ratio", "dt_err_mm", "drot_deg"]
+            "off10", "d_err", "d_bad", "d_bias", "d_rel_pct", "inl", "matches", "ratio", "dt_err_mm", "drot_deg"]
     print("frames  " + " ".join(f"{k:>9s}" for k in keys) + "  kfs")
     n = len(rows)
     for s in range(args.segments):
