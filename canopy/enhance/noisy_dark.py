@@ -18,7 +18,8 @@ against 0.9993: half of the cell's 9.2 mm ATE). A factor near 1 (only windows ne
 itself are averaged) keeps that texture and removes the bias: dark-rows g1-b0-high 9.23 → 4.55 mm with
 1.25, configs/synthetic.yaml's value (second noise draw 6.93 → 5.17; factor 0.75 / 1.0 / 1.5 / 3:
 5.0 / 5.1 / 6.9 / 7.3 mm). The cost: the day-loop at 15 % light, whose dark frames measure the same σ,
-goes 9.99 → 11.14 mm (its bar is 11.2).
+goes 9.99 → 11.14 mm (its bar is 11.2), and a third noise draw of dark-rows goes 5.97 → 8.22 mm: on
+that 150-frame cell the scale moves by ±0.2 % from draw to draw (docs/notes/s14-darkrows.md, §3).
 
 The gate is the σ the denoiser measures, so the clean presets never reach it (every dark frame of the
 clean day-loop, dusk-loop, haze-row and dark-rows: ≤ 9.2, see the note) and keep the factor 2 bit for
