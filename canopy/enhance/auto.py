@@ -48,7 +48,8 @@ import numpy as np
 from canopy.enhance.agcwd import agcwd_unsharp
 from canopy.enhance.common import check_image, luma, on_luma
 from canopy.enhance.dehaze import dark_channel, dehaze_dark_channel, dehaze_inverted
-from canopy.enhance.noise import denoise, estimate_noise
+from canopy.enhance.noise import estimate_noise
+from canopy.enhance.noisy_dark import denoise_frame  # s14-darkrows hook: the ε factor by σ
 from canopy.enhance.params import EnhanceParams
 
 
@@ -133,7 +134,7 @@ def apply_decision(image: np.ndarray, decision: str, params: EnhanceParams,
     out = apply_gamma(out, gamma)
     sigma = estimate_noise(out, rows_fraction=params.noise_rows_fraction) if noise_sigma is None \
         else float(noise_sigma)
-    return denoise(out, sigma, params.denoise_radius, params.denoise_eps_factor), sigma
+    return denoise_frame(out, sigma, params), sigma
 
 
 def auto_full(image: np.ndarray, params: EnhanceParams | None = None) -> tuple[np.ndarray, str, float]:
@@ -197,7 +198,7 @@ def auto_treat(image: np.ndarray, params: EnhanceParams | None = None) -> tuple[
     if dark:
         sigma = max(sigma, params.auto_dark_min_sigma)
     if dark or (params.auto_denoise_lit and sigma > params.auto_noise_sigma):
-        return (denoise(out, sigma, params.denoise_radius, params.denoise_eps_factor), decision + ">dn", sigma,
+        return (denoise_frame(out, sigma, params), decision + ">dn", sigma,
                 gamma)
     return out, decision, 0.0, 1.0
 

@@ -23,7 +23,8 @@ import numpy as np
 from canopy.enhance.auto import _APPLY, _clipped_fraction, apply_gamma, auto_decide, exposure_gamma
 from canopy.enhance.common import check_image, mean_std
 from canopy.enhance.factory import METHOD_FUNCTIONS
-from canopy.enhance.noise import denoise, estimate_noise
+from canopy.enhance.noise import estimate_noise
+from canopy.enhance.noisy_dark import denoise_frame  # s14-darkrows hook: the ε factor by σ
 from canopy.enhance.params import EnhanceParams
 
 
@@ -72,7 +73,7 @@ class PairEnhancer:
         def finish(pair_side):
             image, lifted = pair_side
             lifted = apply_gamma(image, gamma) if lifted is None else lifted
-            return denoise(lifted, sigma, p.denoise_radius, p.denoise_eps_factor)
+            return denoise_frame(lifted, sigma, p)
         out_l, out_r = self._both(finish, (base_l, lifted_l), (base_r, None))
         return out_l, out_r, decision + ">dn", sigma, gamma
 

@@ -67,6 +67,10 @@ class EnhanceParams:
     denoise_radius: int = 2          # px at full resolution (window 5×5)
     denoise_eps_factor: float = 2.0  # ε = (factor·σ)²: windows with std below ~2σ count as flat
     noise_rows_fraction: float = 0.5  # the noise σ is estimated on this central band of rows (speed)
+    # s14-darkrows (canopy.enhance.noisy_dark): frames whose denoiser σ is >= denoise_noisy_sigma
+    # (0 = off) get ε = (denoise_eps_factor_noisy·σ)² instead
+    denoise_noisy_sigma: float = 0.0
+    denoise_eps_factor_noisy: float = 2.0
     # threads for the two images of a pair (canopy.enhance.pair): 1 = one after the other. OpenCV
     # already spreads the big filters over the cores, and on a busy machine (the pipeline's other
     # actors) a second thread only adds CPU (dark KITTI pair: 5.1 vs 4.7 ms CPU at load 8); 2 pays
@@ -93,7 +97,7 @@ class EnhanceParams:
                      "auto_low_std", "auto_haze_dark", "fast_omega", "denoise_eps_factor",
                      "auto_dehaze_max_clip", "auto_noise_sigma", "auto_dark_min_sigma", "noise_rows_fraction",
                      "auto_dark_target_mean", "auto_dark_min_gamma",
-                     "denoised_fallback_weight"):
+                     "denoised_fallback_weight", "denoise_noisy_sigma", "denoise_eps_factor_noisy"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
                 bad(name, "must be a finite number")
@@ -161,6 +165,10 @@ class EnhanceParams:
             bad("noise_rows_fraction", "must be in (0, 1]")
         if not self.denoise_eps_factor > 0.0:
             bad("denoise_eps_factor", "must be > 0")
+        if not self.denoise_eps_factor_noisy > 0.0:
+            bad("denoise_eps_factor_noisy", "must be > 0")
+        if not self.denoise_noisy_sigma >= 0.0:
+            bad("denoise_noisy_sigma", "must be >= 0 (0 = off)")
         if not self.fast_omega > 0.0:
             bad("fast_omega", "must be > 0")
         if self.min_keypoints < 0:
