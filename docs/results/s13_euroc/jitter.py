@@ -48,8 +48,8 @@ kfargs = []
 _kr = trk.keyframe_reasons
 
 
-def kr(p, since, ratio, n_ref, ref_first, n_tc, n_nc):
-    out = _kr(p, since, ratio, n_ref, ref_first, n_tc, n_nc)
+def kr(p, since, ratio, n_ref, ref_first, n_tc, n_nc, *rest):  # *rest: later keyframe_reasons arguments (s14)
+    out = _kr(p, since, ratio, n_ref, ref_first, n_tc, n_nc, *rest)
     kfargs.append((since, ratio if ratio is not None else float('nan'), n_ref, ref_first or 0, n_tc, n_nc, '+'.join(out)))
     return out
 

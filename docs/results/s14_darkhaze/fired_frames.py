@@ -45,7 +45,7 @@ finally:
 
 def run(path: str, on: bool, tmp: Path) -> tuple[dict, list, float]:
     out, fired = tmp / f"{on}.npz", tmp / f"{on}.json"
-    code = HOOK % (str(HERE / "diag_frames.py"), str(fired))
+    code = HOOK % (str(HERE.parent / "s13_haze" / "diag_frames.py"), str(fired))
     sets = [] if on else ["--set", "tracking.ransac_max_deviation_deg=0"]
     res = subprocess.run([sys.executable, "-c", code, path, "--quiet", "--out", str(out), *sets],
                          capture_output=True, text=True, check=True)

@@ -1,4 +1,4 @@
-"""Runs docs/results/s14_jitter/jitter.py (a copy of s13_euroc/jitter.py) (same arguments, CELL / SEED env) with optional patches of local mapping,
+"""Runs docs/results/s13_euroc/jitter.py (same arguments, CELL / SEED env) with optional patches of local mapping,
 to pin down which part of a 3-frame keyframe cadence steadies a still EuRoC camera (docs/notes/s14-jitter.md):
   NOBA=1     local BA does nothing (keyframes inserted, landmarks created, culled; no landmark or pose refined)
   NOCORR=1   tracking ignores local BA's keyframe pose corrections
@@ -79,7 +79,7 @@ if os.environ.get("MAPTIME"):
         return up
     lm.LocalMapper.insert_keyframe = ins
 sys.argv = ["jitter.py"] + sys.argv[1:]
-runpy.run_path("docs/results/s14_jitter/jitter.py", run_name="__main__")
+runpy.run_path("docs/results/s13_euroc/jitter.py", run_name="__main__")
 if stages:
     keys = stages[0].keys()
     print("MAPCPU local mapping CPU %.1f ms per keyframe, %.2f ms per frame (95 frames)" % (
