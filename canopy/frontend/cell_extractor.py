@@ -37,12 +37,12 @@ stereo matching treat both extractors alike.
 """
 from __future__ import annotations
 
-from itertools import repeat
 from operator import attrgetter
 
 import cv2
 import numpy as np
 
+from canopy.frontend.cell_levels import HALF_PATCH, MASK_UV, ic_angles_levels, keypoints_at
 from canopy.frontend.enhanced_extractor import EnhancedCellsRule
 from canopy.frontend.features import Features, OrbExtractor
 from canopy.frontend.params import TrackingParams
@@ -50,7 +50,6 @@ from canopy.frontend.track_health import image_noise_sigma
 
 HARRIS_K = 0.04
 HARRIS_BLOCK = 7
-HALF_PATCH = 15            # ORB's orientation patch radius (HALF_PATCH_SIZE)
 FAST_BORDER = 3            # FAST needs 3 px around a pixel
 _RESPONSE = attrgetter("response")
 
@@ -72,33 +71,7 @@ def level_quotas(n_features: int, scale_factor: float, n_levels: int) -> np.ndar
     return q
 
 
-def _circle_offsets() -> tuple[np.ndarray, np.ndarray]:
-    """(u, v) offsets of ORB's circular orientation patch (its ``umax`` table, radius 15)."""
-    vmax = int(np.floor(HALF_PATCH * np.sqrt(2.0) / 2 + 1))
-    vmin = int(np.ceil(HALF_PATCH * np.sqrt(2.0) / 2))
-    umax = np.zeros(HALF_PATCH + 1, np.int64)
-    for v in range(vmax + 1):
-        umax[v] = int(np.round(np.sqrt(HALF_PATCH ** 2 - v * v)))
-    v0 = 0
-    for v in range(HALF_PATCH, vmin - 1, -1):  # symmetric about the diagonal, as OpenCV / ORB-SLAM
-        while umax[v0] == umax[v0 + 1]:
-            v0 += 1
-        umax[v] = v0
-        v0 += 1
-    us, vs = [], []
-    for v in range(-HALF_PATCH, HALF_PATCH + 1):
-        u = np.arange(-umax[abs(v)], umax[abs(v)] + 1)
-        us.append(u)
-        vs.append(np.full(len(u), v))
-    return np.concatenate(us), np.concatenate(vs)
-
-
-_CU, _CV = _circle_offsets()
-_MASK_U = np.zeros((2 * HALF_PATCH + 1,) * 2, np.float32)  # u (resp. v) inside the circle, 0 outside
-_MASK_V = np.zeros_like(_MASK_U)
-_MASK_U[_CV + HALF_PATCH, _CU + HALF_PATCH] = _CU
-_MASK_V[_CV + HALF_PATCH, _CU + HALF_PATCH] = _CV
-_MASK_UV = np.stack([_MASK_U, _MASK_V])
+_MASK_UV = MASK_UV                               # u (resp. v) inside ORB's circle, 0 outside
 _HB = HARRIS_BLOCK // 2 + 1                      # patch half size incl. the Sobel border
 
 
@@ -363,9 +336,11 @@ class CellExtractor:
         high = int(self.params.fast_threshold if fast_threshold is None else fast_threshold)
         low, sigma = self.fallback_for(img, fallback_threshold, noise_sigma)
         img = np.ascontiguousarray(img)
-        uv, octave, response, desc = [], [], [], []
+        levels = self.pyramid(img)
+        # per level: FAST corners, spread to the level's quota (what is selected depends on the level alone)
+        xs, ys, hs, lv = [], [], [], []
         n_candidates = 0
-        for lvl, level in enumerate(self.pyramid(img)):
+        for lvl, level in enumerate(levels):
             quota = int(self.quotas[lvl])
             if quota <= 0:
                 continue
@@ -386,33 +361,57 @@ class CellExtractor:
                 sel, harris = sel[keep], harris[keep]
             elif rank == "fast":  # ORB-SLAM as is: the best FAST score per node
                 sel = quadtree_select(xf, yf, fast_score, rx, ry, rw, rh, quota)
-                harris = harris_responses(level, x[sel], y[sel]) if self.responses else np.zeros(len(sel), np.float32)
+                harris = harris_responses(level, x[sel], y[sel]) if self.responses else None
             else:  # "harris": the best Harris response per node
                 harris = harris_responses(level, x, y)
                 sel = quadtree_select(xf, yf, harris, rx, ry, rw, rh, quota)
                 harris = harris[sel]
-            x, y = x[sel], y[sel]
-            angles = ic_angles(level, x, y)
-            size = float(self.params.patch_size)
-            # map over the constructor, not a list comprehension: no Python frame per keypoint
-            kps = list(map(cv2.KeyPoint, x.tolist(), y.tolist(), repeat(size, len(x)), angles.tolist()))
-            kps, d = self._orb.compute(level, kps)
+            xs.append(x[sel])
+            ys.append(y[sel])
+            hs.append(harris)
+            lv.append(lvl)
+        # then every level's keypoints at once: orientation, cv2.KeyPoints, descriptors per level
+        # (ORB.compute on the level they were found on, with these angles)
+        feats = self._describe(levels, xs, ys, hs, lv)
+        self.last_stats = {"candidates": n_candidates, "fast_high": high, "fast_low": low, "noise_sigma": sigma}
+        return feats
+
+    def _describe(self, levels: list[np.ndarray], xs: list, ys: list, hs: list, lv: list) -> Features:
+        """Features of the selected corners (``xs[i]``, ``ys[i]`` on pyramid level ``lv[i]``; ``hs[i]``
+        their Harris responses or None for zeros): intensity-centroid angles of all levels in one
+        pass, the cv2.KeyPoints in one call, ``ORB.compute`` per level."""
+        if not xs:
+            return Features.empty()
+        counts = [len(x) for x in xs]
+        starts = np.concatenate([[0], np.cumsum(counts)])
+        x_all, y_all = np.concatenate(xs), np.concatenate(ys)
+        angles = ic_angles_levels([levels[lvl] for lvl in lv], x_all, y_all, starts)
+        kps_all = keypoints_at(x_all, y_all, float(self.params.patch_size), angles)
+        keep, desc = [], []
+        for i, lvl in enumerate(lv):
+            a, b = int(starts[i]), int(starts[i + 1])
+            kps, d = self._orb.compute(levels[lvl], kps_all[a:b])
             if d is None or len(kps) == 0:
                 continue
-            if len(kps) != len(x):  # OpenCV dropped some (border; it keeps the others' order): by position
+            if len(kps) != b - a:  # OpenCV dropped some (border; it keeps the others' order): by position
+                x, y, w = xs[i], ys[i], levels[lvl].shape[1]
                 kept = np.asarray(cv2.KeyPoint_convert(kps), np.float32).reshape(-1, 2).astype(np.int64)
-                idx = np.flatnonzero(np.isin(y * level.shape[1] + x, kept[:, 1] * level.shape[1] + kept[:, 0]))
-                x, y, harris = x[idx], y[idx], harris[idx]
-            s = float(self.scale_factors[lvl])
-            uv.append(np.column_stack([x, y]).astype(np.float32) * s)
-            octave.append(np.full(len(x), lvl, np.int32))
-            response.append(harris)
+                keep.append(a + np.flatnonzero(np.isin(y * w + x, kept[:, 1] * w + kept[:, 0])))
+            else:
+                keep.append(np.arange(a, b))
             desc.append(d)
-        self.last_stats = {"candidates": n_candidates, "fast_high": high, "fast_low": low, "noise_sigma": sigma}
-        if not uv:
+        if not desc:
             return Features.empty()
-        return Features(np.concatenate(uv), np.concatenate(octave), np.concatenate(response),
-                        np.concatenate(desc), extractor="cells")
+        idx = np.concatenate(keep)
+        octave = np.repeat(np.asarray(lv, np.int32), counts)[idx]
+        # float32 (x, y) times the level's scale as float32: what the per-level float32 * scale gave
+        scale = self.scale_factors.astype(np.float32)[octave]
+        uv = np.column_stack([x_all[idx], y_all[idx]]).astype(np.float32) * scale[:, None]
+        if all(h is None for h in hs):
+            response = np.zeros(len(idx), np.float32)
+        else:
+            response = np.concatenate([np.zeros(n, np.float32) if h is None else h for h, n in zip(hs, counts)])[idx]
+        return Features(uv, octave, response, np.concatenate(desc), extractor="cells")
 
 
 def make_extractor(params: TrackingParams, responses: bool = True):
