@@ -42,7 +42,7 @@ from operator import attrgetter
 import cv2
 import numpy as np
 
-from canopy.frontend.cell_levels import HALF_PATCH, MASK_UV, ic_angles_levels, keypoints_at
+from canopy.frontend.cell_levels import HALF_PATCH, MASK_UV, KeyPointPool, ic_angles_levels
 from canopy.frontend.enhanced_extractor import EnhancedCellsRule
 from canopy.frontend.features import Features, OrbExtractor
 from canopy.frontend.params import TrackingParams
@@ -217,6 +217,7 @@ class CellExtractor:
                                    scoreType=cv2.ORB_HARRIS_SCORE, patchSize=params.patch_size)
         self._opencv = OrbExtractor(params) if params.extractor_enhanced == "opencv" else None
         self._enhanced_rule = EnhancedCellsRule(params) if self._opencv is not None else None
+        self._keypoints = KeyPointPool(params.patch_size)  # the cv2.KeyPoints ORB.compute is given
         self.last_stats: dict = {}
 
     def pyramid(self, image: np.ndarray) -> list[np.ndarray]:
@@ -386,7 +387,7 @@ class CellExtractor:
         starts = np.concatenate([[0], np.cumsum(counts)])
         x_all, y_all = np.concatenate(xs), np.concatenate(ys)
         angles = ic_angles_levels([levels[lvl] for lvl in lv], x_all, y_all, starts)
-        kps_all = keypoints_at(x_all, y_all, float(self.params.patch_size), angles)
+        kps_all = self._keypoints.keypoints(x_all, y_all, angles)
         keep, desc = [], []
         for i, lvl in enumerate(lv):
             a, b = int(starts[i]), int(starts[i + 1])
