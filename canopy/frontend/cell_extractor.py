@@ -54,11 +54,14 @@ FAST_BORDER = 3            # FAST needs 3 px around a pixel
 _RESPONSE = attrgetter("response")
 
 
-def _fast_points(detector, view: np.ndarray, ox: int, oy: int) -> tuple[np.ndarray, np.ndarray]:
-    """FAST corners of an image view as ((K,2) int64 pixel coordinates offset by (ox, oy), (K,) scores)."""
+def _fast_points(detector, view: np.ndarray, ox: int, oy: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """FAST corners of an image view: (x, y) contiguous int64 pixel coordinates offset by (ox, oy)
+    and (K,) int16 scores (FAST's score is an integer 0..255: as int16 the quadtree's stable sort
+    is a radix sort and needs no test of the floats first)."""
     kps = detector.detect(view)
-    pts = np.asarray(cv2.KeyPoint_convert(kps), np.float32).reshape(-1, 2).astype(np.int64) + (ox, oy)
-    return pts, np.fromiter(map(_RESPONSE, kps), np.float32, len(kps))
+    xy = np.asarray(cv2.KeyPoint_convert(kps), np.float32).reshape(-1, 2).T.astype(np.int64, order="C")
+    xy += np.array([[ox], [oy]], np.int64)
+    return xy[0], xy[1], np.fromiter(map(_RESPONSE, kps), np.int16, len(kps))
 
 
 def level_quotas(n_features: int, scale_factor: float, n_levels: int) -> np.ndarray:
@@ -159,9 +162,11 @@ def quadtree_select(x: np.ndarray, y: np.ndarray, score: np.ndarray, x0: float, 
 
 def _descending_key(score: np.ndarray) -> np.ndarray:
     """A key whose stable ascending sort is that of ``-score``. FAST scores are small integers
-    (0..255, stored as float32): as int16, numpy's stable sort is a radix sort, ~10x faster than
+    (0..255, as float32 or int16): as int16, numpy's stable sort is a radix sort, ~10x faster than
     the merge sort of floats (~0.4 ms per 5 k corners); same order, ties in input order."""
     neg = -np.asarray(score)
+    if neg.dtype == np.int16:   # the extractor's FAST scores (0..255): no test needed
+        return neg
     if len(neg) and neg.dtype.kind == "f" and -32768 <= neg.min() and neg.max() <= 32767:
         as_int = neg.astype(np.int16)
         if np.array_equal(as_int, neg):
@@ -218,6 +223,7 @@ class CellExtractor:
         self._opencv = OrbExtractor(params) if params.extractor_enhanced == "opencv" else None
         self._enhanced_rule = EnhancedCellsRule(params) if self._opencv is not None else None
         self._keypoints = KeyPointPool(params.patch_size)  # the cv2.KeyPoints ORB.compute is given
+        self._cells: dict = {}                              # cell look-up tables per level size
         self.last_stats: dict = {}
 
     def pyramid(self, image: np.ndarray) -> list[np.ndarray]:
@@ -243,8 +249,9 @@ class CellExtractor:
         return min(low, 254), sigma
 
     def _fallback_corners(self, img: np.ndarray, empty: np.ndarray, low: int, x0: int, y0: int,
-                          x1: int, y1: int, cw: int, ch: int) -> tuple[np.ndarray, np.ndarray]:
-        """FAST corners at ``low`` in the ``empty`` cells (nrow x ncol bool) of the detection region.
+                          x1: int, y1: int, cw: int, ch: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """FAST corners at ``low`` in the ``empty`` cells (nrow x ncol bool) of the detection region:
+        (x, y, int16 scores).
 
         The corners are those of one FAST call per cell row on a view from the row's first to its
         last empty cell with FAST's 3 px border (ORB-SLAM calls FAST per cell, cells overlapping by
@@ -278,47 +285,56 @@ class CellExtractor:
             kps += k
             counts.append(len(k))
         if not kps:
-            return np.zeros((0, 2), np.int64), np.zeros(0, np.float32)
+            e = np.zeros(0, np.int64)
+            return e, e, np.zeros(0, np.int16)
         run = np.repeat(np.arange(len(counts)), counts)   # the run of every corner
-        pts = np.asarray(cv2.KeyPoint_convert(kps), np.float32).reshape(-1, 2).astype(np.int64)
-        px = pts[:, 0] + va[run]
-        py = pts[:, 1] + (ya - FAST_BORDER)[run]
-        score = np.fromiter(map(_RESPONSE, kps), np.float32, len(kps))
+        xy = np.asarray(cv2.KeyPoint_convert(kps), np.float32).reshape(-1, 2).T.astype(np.int64, order="C")
+        px = xy[0] + va[run]
+        py = xy[1] + (ya - FAST_BORDER)[run]
+        score = np.fromiter(map(_RESPONSE, kps), np.int16, len(kps))
         ok = np.flatnonzero((px >= xa[run]) & (px < xb[run]))
         px, py, score = px[ok], py[ok], score[ok]
         # row-major, as one FAST call per cell row returns them (the quadtree's ties keep input order)
         order = np.argsort(py * img.shape[1] + px, kind="stable")
-        return np.column_stack([px[order], py[order]]), score[order]
+        return px[order], py[order], score[order]
 
     def detect_level(self, img: np.ndarray, high: int, low: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple]:
-        """FAST corners of one level: (x, y int arrays, FAST scores) with ``high`` in every cell and
+        """FAST corners of one level: (x, y int64 arrays, int16 FAST scores) with ``high`` in every cell and
         ``low`` in the cells where ``high`` found none; plus the detection region (x0, y0, w, h)."""
         h, w = img.shape
         b = self.border
         x0, y0, x1, y1 = b, b, w - b, h - b
         if x1 - x0 < 4 or y1 - y0 < 4:
             e = np.zeros(0, np.int64)
-            return e, e, np.zeros(0, np.float32), (x0, y0, 0, 0)
+            return e, e, np.zeros(0, np.int16), (x0, y0, 0, 0)
         cs = self.params.cell_size
         ncol, nrow = max(1, (x1 - x0) // cs), max(1, (y1 - y0) // cs)
         cw, ch = int(np.ceil((x1 - x0) / ncol)), int(np.ceil((y1 - y0) / nrow))
         self._fast.setThreshold(int(high))
-        pts, score = _fast_points(self._fast, img[y0 - FAST_BORDER:y1 + FAST_BORDER, x0 - FAST_BORDER:x1 + FAST_BORDER],
-                                  x0 - FAST_BORDER, y0 - FAST_BORDER)
-        keep = (pts[:, 0] >= x0) & (pts[:, 0] < x1) & (pts[:, 1] >= y0) & (pts[:, 1] < y1)
-        if not keep.all():  # OpenCV's FAST leaves the view's 3 px border out: all are inside, as a rule
-            pts, score = pts[keep], score[keep]
-        pts_all, scores = [pts], [score]
+        x, y, score = _fast_points(self._fast, img[y0 - FAST_BORDER:y1 + FAST_BORDER, x0 - FAST_BORDER:x1 + FAST_BORDER],
+                                   x0 - FAST_BORDER, y0 - FAST_BORDER)
+        # OpenCV's FAST leaves the view's 3 px border out: all are inside, as a rule
+        if len(x) and not (x.min() >= x0 and x.max() < x1 and y.min() >= y0 and y.max() < y1):
+            keep = (x >= x0) & (x < x1) & (y >= y0) & (y < y1)
+            x, y, score = x[keep], y[keep], score[keep]
         if low < high:
-            p = pts_all[0]
-            cell = np.minimum((p[:, 1] - y0) // ch, nrow - 1) * ncol + np.minimum((p[:, 0] - x0) // cw, ncol - 1)
-            empty = (np.bincount(cell, minlength=nrow * ncol) == 0).reshape(nrow, ncol)
+            row_cell, col_cell = self._cell_tables(h, w, x0, y0, cw, ch, nrow, ncol)
+            empty = (np.bincount(row_cell[y] + col_cell[x], minlength=nrow * ncol) == 0).reshape(nrow, ncol)
             if empty.any():
-                q, sq = self._fallback_corners(img, empty, int(low), x0, y0, x1, y1, cw, ch)
-                pts_all.append(q)
-                scores.append(sq)
-        pts = np.concatenate(pts_all)
-        return pts[:, 0], pts[:, 1], np.concatenate(scores), (x0, y0, x1 - x0, y1 - y0)
+                qx, qy, qs = self._fallback_corners(img, empty, int(low), x0, y0, x1, y1, cw, ch)
+                x, y, score = np.concatenate([x, qx]), np.concatenate([y, qy]), np.concatenate([score, qs])
+        return x, y, score, (x0, y0, x1 - x0, y1 - y0)
+
+    def _cell_tables(self, h: int, w: int, x0: int, y0: int, cw: int, ch: int, nrow: int, ncol: int):
+        """(row's cell index x ncol per pixel row, cell column per pixel column) of a level's cell grid,
+        made once per level size: a corner's cell is two table look-ups and an add."""
+        key = (h, w)
+        tables = self._cells.get(key)
+        if tables is None:
+            rows = np.minimum(np.maximum(np.arange(h) - y0, 0) // ch, nrow - 1) * ncol
+            cols = np.minimum(np.maximum(np.arange(w) - x0, 0) // cw, ncol - 1)
+            tables = self._cells[key] = (rows, cols)
+        return tables
 
     def extract(self, image: np.ndarray, fast_threshold: int | None = None,
                 fallback_threshold: int | None = None, min_keypoints: int = 0,
@@ -353,7 +369,7 @@ class CellExtractor:
             # strongest Harris responses of those (cv2.ORB's ranking of its 2x FAST retention) fill
             # the quota. A second quadtree on Harris instead keeps weaker corners in empty areas:
             # 20 % fewer stereo matches on KITTI 06 (docs/notes/s6-cells.md)
-            xf, yf = x.astype(np.float64), y.astype(np.float64)
+            xf, yf = x, y      # quadtree_select's (x - x0) / rw on int64 equals it on float64 copies
             rank = self.params.cell_ranking
             if rank == "harris2x":
                 sel = quadtree_select(xf, yf, fast_score, rx, ry, rw, rh, 2 * quota)
