@@ -150,3 +150,57 @@ def test_the_harris_rankings_equal_the_per_level_reference(images, ranking):
     ex = CellExtractor(params)
     for img in images["kitti"][:2]:
         assert_same(ex.extract(img), reference_extract(ex, img, True))
+
+
+def reference_quadtree(x, y, score, x0, y0, width, height, quota) -> np.ndarray:
+    """quadtree_select written out with Python sets and dicts: regular 2^d subdivisions of ORB-SLAM's
+    ~square root nodes, the first depth (from log4(quota / roots)) whose occupied nodes reach the
+    quota, the best (score, then input order) per node; over quota: every parent node's best, then
+    the other winners by rank up to the quota."""
+    n = len(x)
+    if n <= quota:
+        return np.arange(n)
+    if quota <= 0:
+        return np.zeros(0, np.int64)
+    n_root = max(1, int(round(width / height)))
+    rw = width / n_root
+    rank = {int(i): r for r, i in enumerate(sorted(range(n), key=lambda i: (-float(score[i]), i)))}
+
+    def nodes(d):
+        k = 2 ** d
+        return [(int(np.floor((float(y[i]) - y0) / height * k)), int(np.floor((float(x[i]) - x0) / rw * k)))
+                for i in range(n)]
+
+    def best(keys):
+        out = {}
+        for i, key in enumerate(keys):
+            if key not in out or rank[i] < rank[out[key]]:
+                out[key] = i
+        return set(out.values())
+
+    depth = max(0, int(np.floor(np.log(quota / n_root) / np.log(4.0))))
+    while not (len(set(nodes(depth))) >= quota or rw / 2 ** depth < 1.0):
+        depth += 1
+    winners = best(nodes(depth))
+    if len(winners) <= quota:
+        return np.array(sorted(winners), np.int64)
+    parents = best(nodes(depth - 1)) if depth > 0 else set()
+    rest = sorted(winners - parents, key=rank.get)[: quota - len(parents)]
+    return np.array(sorted(parents | set(rest)), np.int64)
+
+
+def test_quadtree_select_equals_a_written_out_reference():
+    """Random points with many tied scores (FAST's are integers), float and int16 scores, int and
+    float coordinates, quotas from 0 to above the point count."""
+    rng = np.random.default_rng(5)
+    for _ in range(60):
+        n = int(rng.integers(1, 700))
+        w, h = int(rng.integers(20, 1300)), int(rng.integers(20, 400))
+        x0, y0 = int(rng.integers(0, 30)), int(rng.integers(0, 30))
+        x, y = x0 + rng.integers(0, w, n), y0 + rng.integers(0, h, n)
+        score = rng.integers(0, int(rng.integers(1, 30)), n)
+        quota = int(rng.integers(0, n + 20))
+        ref = reference_quadtree(x, y, score, x0, y0, w, h, quota)
+        for xs, ys, sc in ((x, y, score.astype(np.int16)), (x.astype(np.float64), y.astype(np.float64),
+                                                               score.astype(np.float32))):
+            np.testing.assert_array_equal(quadtree_select(xs, ys, sc, x0, y0, w, h, quota), ref)

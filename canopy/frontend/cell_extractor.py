@@ -139,25 +139,38 @@ def quadtree_select(x: np.ndarray, y: np.ndarray, score: np.ndarray, x0: float, 
     # depths below log4(quota / n_root) have fewer nodes than the quota: start there
     depth = max(0, int(np.floor(np.log(quota / n_root) / np.log(4.0))))
     prev_key = None if depth == 0 else _node_keys(rx, ry, n_root, depth - 1, floor)
+    n_prev = 0 if prev_key is None else int(prev_key.max()) + 1
     while True:
         key = _node_keys(rx, ry, n_root, depth, floor)
-        occupied = np.zeros(int(key.max()) + 1, bool)
+        n_keys = int(key.max()) + 1
+        occupied = np.zeros(n_keys, bool)
         occupied[key] = True
-        if int(occupied.sum()) >= quota or rw / 2 ** depth < 1.0:
+        if int(np.count_nonzero(occupied)) >= quota or rw / 2 ** depth < 1.0:
             break
-        prev_key = key
+        prev_key, n_prev = key, n_keys
         depth += 1
-    winners = _best_per_key(key, rank, by_rank)
-    if len(winners) <= quota:
-        return winners
+    # in rank space (index r = the point of rank r, by_rank[r]): the best of a node is its smallest
+    # rank, and a list of ranks marked in a bool array comes out sorted by rank without a sort
+    win = _best_ranks(key, rank, n_keys)
+    if np.count_nonzero(win) <= quota:
+        return np.sort(by_rank[win])
     # every parent node keeps its best (they are fewer than the quota), the rest by score: ORB-SLAM
     # splits the most populated nodes last in its final round, which ends at the quota
-    parent_best = _best_per_key(prev_key, rank, by_rank) if prev_key is not None else np.zeros(0, np.int64)
-    is_parent_best = np.zeros(n, bool)   # a parent's best is its child's best too: a subset of winners
-    is_parent_best[parent_best] = True
-    rest = winners[~is_parent_best[winners]]
-    rest = rest[np.argsort(rank[rest], kind="stable")[: quota - len(parent_best)]]
-    return np.sort(np.concatenate([parent_best, rest]))
+    if prev_key is None:
+        parent = np.zeros(n, bool)
+    else:
+        parent = _best_ranks(prev_key, rank, n_prev)   # a parent's best is its child's best too
+    rest = np.flatnonzero(win & ~parent)[: quota - int(np.count_nonzero(parent))]
+    return np.sort(by_rank[np.concatenate([np.flatnonzero(parent), rest])])
+
+
+def _best_ranks(key: np.ndarray, rank: np.ndarray, n_keys: int) -> np.ndarray:
+    """(n,) bool indexed by rank: True at the best (smallest) rank of every key."""
+    best = np.full(n_keys, len(rank), np.int64)
+    np.minimum.at(best, key, rank)
+    out = np.zeros(len(rank), bool)
+    out[best[best < len(rank)]] = True
+    return out
 
 
 def _descending_key(score: np.ndarray) -> np.ndarray:
