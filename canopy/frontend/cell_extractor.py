@@ -31,6 +31,10 @@ How it is done here (vectorised; no per-keypoint Python except setting the angle
 * Orientation: intensity centroid (Rosin 1999) in the circular patch of radius 15 (ORB's
   ``umax``), from gathered patches; descriptors: ``cv2.ORB.compute`` on each level with these
   angles (OpenCV keeps the given ``KeyPoint.angle``, tests/test_cell_extractor.py checks it).
+  Both run once for all levels' selected corners (``canopy.frontend.cell_levels``: one patch
+  gather per level into one buffer, one product; ``cv2.KeyPoint`` objects from a pool): the same
+  outputs as level by level (tests/test_cell_levels.py), ~10 % less CPU per KITTI image
+  (docs/notes/s15-extract.md).
 
 Coordinates follow cv2.ORB's convention (x_level * scale^level), so ``keypoint_centres`` and
 stereo matching treat both extractors alike.
@@ -126,7 +130,8 @@ def ic_angles(img: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
 def quadtree_select(x: np.ndarray, y: np.ndarray, score: np.ndarray, x0: float, y0: float,
                     width: float, height: float, quota: int) -> np.ndarray:
     """Indices of at most ``quota`` points spread as ORB-SLAM's ``DistributeOctTree`` spreads
-    them (best ``score`` per node), vectorised over depths of a regular quadtree."""
+    them (best ``score`` per node), vectorised over depths of a regular quadtree. ``x``, ``y``:
+    int or float arrays ((x - x0) / rw is the same float64 either way for pixel coordinates)."""
     n = len(x)
     if n <= quota:
         return np.arange(n)
@@ -388,19 +393,18 @@ class CellExtractor:
             # strongest Harris responses of those (cv2.ORB's ranking of its 2x FAST retention) fill
             # the quota. A second quadtree on Harris instead keeps weaker corners in empty areas:
             # 20 % fewer stereo matches on KITTI 06 (docs/notes/s6-cells.md)
-            xf, yf = x, y      # quadtree_select's (x - x0) / rw on int64 equals it on float64 copies
             rank = self.params.cell_ranking
             if rank == "harris2x":
-                sel = quadtree_select(xf, yf, fast_score, rx, ry, rw, rh, 2 * quota)
+                sel = quadtree_select(x, y, fast_score, rx, ry, rw, rh, 2 * quota)
                 harris = harris_responses(level, x[sel], y[sel])
                 keep = np.sort(np.argsort(-harris, kind="stable")[:quota])
                 sel, harris = sel[keep], harris[keep]
             elif rank == "fast":  # ORB-SLAM as is: the best FAST score per node
-                sel = quadtree_select(xf, yf, fast_score, rx, ry, rw, rh, quota)
+                sel = quadtree_select(x, y, fast_score, rx, ry, rw, rh, quota)
                 harris = harris_responses(level, x[sel], y[sel]) if self.responses else None
             else:  # "harris": the best Harris response per node
                 harris = harris_responses(level, x, y)
-                sel = quadtree_select(xf, yf, harris, rx, ry, rw, rh, quota)
+                sel = quadtree_select(x, y, harris, rx, ry, rw, rh, quota)
                 harris = harris[sel]
             xs.append(x[sel])
             ys.append(y[sel])
@@ -415,7 +419,8 @@ class CellExtractor:
     def _describe(self, levels: list[np.ndarray], xs: list, ys: list, hs: list, lv: list) -> Features:
         """Features of the selected corners (``xs[i]``, ``ys[i]`` on pyramid level ``lv[i]``; ``hs[i]``
         their Harris responses or None for zeros): intensity-centroid angles of all levels in one
-        pass, the cv2.KeyPoints in one call, ``ORB.compute`` per level."""
+        pass (``cell_levels.ic_angles_levels``), the cv2.KeyPoints from the extractor's pool,
+        ``ORB.compute`` per level."""
         if not xs:
             return Features.empty()
         counts = [len(x) for x in xs]
