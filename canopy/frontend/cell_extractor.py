@@ -206,18 +206,6 @@ def _node_keys(rx: np.ndarray, ry: np.ndarray, n_root: int, depth: int, floor: b
     return (ry * k).astype(np.int64) * (n_root * k + 1) + (rx * k).astype(np.int64)
 
 
-def _best_per_key(key: np.ndarray, rank: np.ndarray, by_rank: np.ndarray | None = None) -> np.ndarray:
-    """Index of the best-ranked point of every key (``rank``: a permutation, 0 = best), sorted.
-    The smallest rank per key by ``np.minimum.at`` over a table of the keys: no sort of all points.
-    ``by_rank``: the inverse permutation (the point of each rank) if the caller has it."""
-    best = np.full(int(key.max()) + 1, len(rank), np.int64)
-    np.minimum.at(best, key, rank)
-    if by_rank is None:
-        by_rank = np.empty_like(rank)
-        by_rank[rank] = np.arange(len(rank))
-    return np.sort(by_rank[best[best < len(rank)]])
-
-
 class CellExtractor:
     """ORB-SLAM-style ORB on one image; same interface and output as ``OrbExtractor``:
     ``extract(image, fast_threshold=None, fallback_threshold=None, min_keypoints=0)``.
