@@ -4,7 +4,7 @@
 ``DistributeOctTree``), orients them with ``ic_angles`` (Rosin's intensity centroid) and hands them
 to ``cv2.ORB.compute`` as ``cv2.KeyPoint`` objects. Done level by level, the orientation's ~15 numpy
 calls per level cost more than their work on the small levels (a KITTI image's level 7 keeps 122
-corners, level 0 434): here one gather per level into one buffer and one product for all. The
+corners, level 0 434): here one gather and product per level into one array, one arctan2 for all. The
 keypoints come from a pool instead of one constructor call each. The outputs equal the per-level
 code's (tests/test_cell_levels.py: the extractor against a written-out per-level reference).
 
@@ -51,22 +51,24 @@ MASK_UV[1, CIRCLE_V + HALF_PATCH, CIRCLE_U + HALF_PATCH] = CIRCLE_V
 
 def ic_angles_levels(levels: list[np.ndarray], x: np.ndarray, y: np.ndarray, starts) -> np.ndarray:
     """``ic_angles`` of every level's points (level l: ``x[starts[l]:starts[l+1]]`` on ``levels[l]``):
-    the patches of all levels gathered into one buffer, then one product with the circle's u / v
-    masks. The moments are integers below 2^24, exact in float32 in any summation order."""
+    each level's patches as one gather from a strided view of all its patches (sliding_window_view's,
+    without its checks), their two moments by one product with the circle's u / v masks written
+    into one (K, 2) array, then one arctan2 for all. The moments are integers below 2^24, exact in
+    float32 in any summation order. (Gathering all levels into one buffer first for a single product
+    costs a 1.9 MB copy: 5 % more.)"""
     n = int(starts[-1])
     if n == 0:
         return np.zeros(0, np.float32)
     w = 2 * HALF_PATCH + 1
-    p = np.empty((n, w, w), np.uint8)
+    m = np.empty((n, 2), np.float32)
     for lvl, img in enumerate(levels):
         a, b = int(starts[lvl]), int(starts[lvl + 1])
         if b > a:
-            # the patch of every pixel as a strided view (sliding_window_view's, without its checks)
             h, wd = img.shape
             s0, s1 = img.strides
             win = np.ndarray((h - w + 1, wd - w + 1, w, w), np.uint8, img, 0, (s0, s1, s0, s1))
-            p[a:b] = win[y[a:b] - HALF_PATCH, x[a:b] - HALF_PATCH]
-    m = np.einsum("kij,mij->km", p, MASK_UV)
+            # uint8 patches straight into einsum (einsum, not @: no OpenBLAS threads)
+            np.einsum("kij,mij->km", win[y[a:b] - HALF_PATCH, x[a:b] - HALF_PATCH], MASK_UV, out=m[a:b])
     return np.mod(np.degrees(np.arctan2(m[:, 1], m[:, 0])), 360.0).astype(np.float32)
 
 
