@@ -32,9 +32,9 @@ How it is done here (vectorised; no per-keypoint Python except setting the angle
   ``umax``), from gathered patches; descriptors: ``cv2.ORB.compute`` on each level with these
   angles (OpenCV keeps the given ``KeyPoint.angle``, tests/test_cell_extractor.py checks it).
   Both run once for all levels' selected corners (``canopy.frontend.cell_levels``: one patch
-  gather and product per level into one array, one arctan2; ``cv2.KeyPoint`` objects from a pool): the same
-  outputs as level by level (tests/test_cell_levels.py), ~10 % less CPU per KITTI image
-  (docs/notes/s15-extract.md).
+  gather and product per level into one array, one arctan2; ``cv2.KeyPoint`` objects from a
+  pool): the same outputs as level by level (tests/test_cell_levels.py), ~11 % less CPU per
+  KITTI image with the changes of docs/notes/s15-extract.md.
 
 Coordinates follow cv2.ORB's convention (x_level * scale^level), so ``keypoint_centres`` and
 stereo matching treat both extractors alike.
