@@ -23,6 +23,7 @@ from operator import attrgetter
 import gtsam
 import numpy as np
 
+from canopy.backend.keyframe_culling import cull_redundant_keyframes
 from canopy.backend.local_ba import LocalBundleAdjustmentMixin
 from canopy.backend.map_store import Keyframe, Landmark, LandmarkStore, LineLandmark, MapStoreAccess, local_map_update
 from canopy.backend.params import MappingParams
@@ -66,6 +67,9 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         # keypoints not to triangulate, per keyframe (mapping.triangulate_skip_stereo)
         self._no_triangulation: dict[int, np.ndarray] = {}
         self.n_triangulated = 0
+        # keyframes removed by mapping.keyframe_culling: index -> (parent, T_parent_k, timestamp) (canopy.backend.keyframe_culling)
+        self.culled_keyframes: dict[int, tuple[int, np.ndarray, float]] = {}
+        self.n_keyframes_culled = 0
 
     # ----------------------------------------------------------------- public API
     def insert_keyframe(self, kf: KeyframeData) -> LocalMapUpdate:
@@ -89,6 +93,12 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         t0 = time.perf_counter()
         self._cull(rec)
         timings["cull"] = _ms(t0)
+        if self.params.keyframe_culling:  # ORB-SLAM's KeyFrameCulling, after local BA as there
+            t0 = time.perf_counter()
+            if cull_redundant_keyframes(self, rec, self._covisible(rec)):
+                local = [k for k in local if k in self.keyframes]
+                fixed = [k for k in fixed if k in self.keyframes]
+            timings["kfcull"] = _ms(t0)
         t0 = time.perf_counter()
         update = self._make_update(rec, local, fixed)
         timings["update"] = _ms(t0)

@@ -243,13 +243,27 @@ class MapStoreAccess:
     def keyframe_trajectory(self):
         from shared.types import Trajectory
 
-        idx = sorted(self.keyframes)
-        stamps = [self.keyframes[i].timestamp for i in idx]
-        poses = [self.keyframes[i].T_world_cam for i in idx] if idx else np.zeros((0, 4, 4))
+        culled = self._culled_poses()
+        idx = sorted(set(self.keyframes) | set(culled))
+        stamps = [self.keyframes[i].timestamp if i in self.keyframes else self.culled_keyframes[i][2] for i in idx]
+        poses = [self.keyframes[i].T_world_cam if i in self.keyframes else culled[i] for i in idx] \
+            if idx else np.zeros((0, 4, 4))
         return Trajectory(np.asarray(stamps, float), np.asarray(poses, float), meta={"indices": idx})
 
     def keyframe_poses(self) -> dict[int, np.ndarray]:
-        return {i: k.T_world_cam.copy() for i, k in self.keyframes.items()}
+        """Every keyframe's pose, culled ones (mapping.keyframe_culling) too, through their parents: the
+        frames tracked against a culled keyframe keep following the map's corrections."""
+        poses = {i: k.T_world_cam.copy() for i, k in self.keyframes.items()}
+        poses.update(self._culled_poses())
+        return poses
+
+    def _culled_poses(self) -> dict[int, np.ndarray]:
+        culled = getattr(self, "culled_keyframes", None)
+        if not culled:
+            return {}
+        from canopy.backend.keyframe_culling import culled_pose
+        out = {k: culled_pose(self.keyframes, culled, k) for k in culled}
+        return {k: T for k, T in out.items() if T is not None}
 
     def map_points(self) -> np.ndarray:
         if not self.landmarks:
