@@ -303,6 +303,11 @@ class MapStoreAccess:
             in_set = np.zeros(max(int(e_kf.max()), max(kf_set)) + 1, bool)
             in_set[list(kf_set)] = True
             keep = in_set[e_kf]
+        p = getattr(self, "params", None)
+        if getattr(p, "window_max_fixed", 0) > 0 or getattr(p, "keyframe_culling", False):
+            # BA sees part of the landmarks' observations: only depth-constrained ones move (still_window)
+            from canopy.backend.still_window import depth_constrained
+            return depth_constrained(self, lm_ids, e_kf[keep], e_lm[keep], e_kp[keep])
         return lm_ids, e_kf[keep], e_lm[keep], e_kp[keep]
 
     def _delete_landmark(self, lid: int) -> None:
