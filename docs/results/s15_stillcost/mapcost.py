@@ -49,10 +49,10 @@ print(f"ATE {out.get('ate', float('nan')) * 1e3:.4f} mm, tracked {out['tracked']
       f"culled {recs[-1]['kf_culled'] if recs else 0}")
 cpu = np.array([r["cpu"] for r in recs])
 print(f"local mapping CPU {cpu.mean():.1f} ms per keyframe, {cpu.sum() / n_frames:.2f} ms per frame ({n_frames} frames)")
-thirds = np.array_split(np.arange(len(recs)), 3)
+thirds = np.array_split(np.arange(len(recs)), 6 if os.environ.get("SIXTHS") else 3)
 keys = ["cpu", "insert", "window", "ba", "cull", "kfcull", "update", "n_local", "n_fixed", "n_kf", "n_lm", "obs_mean", "n_upd"]
-for name, idx in zip(["first", "second", "last"], thirds):
-    print(f"  {name:6s} third: " + ", ".join(f"{k} {np.mean([recs[i].get(k, 0) for i in idx]):.1f}" for k in keys))
+for name, idx in zip([f"part {i + 1}/{len(thirds)}" for i in range(len(thirds))], thirds):
+    print(f"  {name:8s}: " + ", ".join(f"{k} {np.mean([recs[i].get(k, 0) for i in idx]):.1f}" for k in keys))
 if os.environ.get("VERBOSE"):
     for r in recs:
         print("  kf", ", ".join(f"{k} {r.get(k, 0):.1f}" for k in ["kf"] + keys))
