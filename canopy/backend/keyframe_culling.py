@@ -95,8 +95,8 @@ def cull_keyframe(mapper, k: int) -> int:
 
 def cull_redundant_keyframes(mapper, rec, covisible: dict[int, int]) -> list[int]:
     """ORB-SLAM's KeyFrameCulling after keyframe ``rec``: each of its covisible keyframes (strongest
-    first, as GetVectorCovisibleKeyFrames) whose landmarks are at least ``keyframe_culling_redundancy``
-    seen by ``keyframe_culling_observers`` other keyframes goes, in turn (a culled keyframe's
+    first, as GetVectorCovisibleKeyFrames) whose landmarks are more than ``keyframe_culling_redundancy``
+    (ORB-SLAM: nRedundantObservations > 0.9 nMPs) seen by ``keyframe_culling_observers`` other keyframes goes, in turn (a culled keyframe's
     observations no longer count for the next). Protected: ``rec``, its segment's first keyframe, and
     the newest ``keyframe_culling_keep_recent`` keyframes. Returns the culled keyframes' indices."""
     p = mapper.params
