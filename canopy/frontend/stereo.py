@@ -131,22 +131,13 @@ def subpixel_refine(left_img: np.ndarray, right_img: np.ndarray, uvl: np.ndarray
     if not parts:
         return u_out, sad_out, ok_out
     sel, xr0, s = (np.concatenate([part[i] for part in parts]) for i in range(3))
-    patch_l = np.concatenate([part[3] for part in parts]).astype(np.int16)
-    band = np.concatenate([part[4] for part in parts]).astype(np.int16)
     if normalise == "mean":
+        patch_l = np.concatenate([part[3] for part in parts]).astype(np.int16)
+        band = np.concatenate([part[4] for part in parts]).astype(np.int16)
         sad = _zero_mean_sad(patch_l, band, 2 * L + 1)
     else:
-        patch_l -= patch_l[:, w:w + 1, w:w + 1]
-        sad = np.empty((len(sel), 2 * L + 1), np.float64)
-        # int16 differences of uint8 pixels, one window shift at a time: the (K,P,P) temporaries
-        # stay small (20x faster than one (K,P,2L+1,P) float array; identical sums)
-        diff = np.empty(patch_l.shape, np.int16)  # one buffer for every shift (no temporaries)
-        for shift in range(2 * L + 1):
-            # window at this shift minus its centre pixel, minus the centred left patch
-            np.subtract(band[:, :, shift:shift + 2 * w + 1], patch_l, out=diff)
-            diff -= band[:, w:w + 1, shift + w:shift + w + 1]
-            np.abs(diff, out=diff)
-            sad[:, shift] = diff.reshape(len(sel), -1).view(sum_type).sum(axis=1, dtype=sum_type)
+        sad = _centre_sad(np.concatenate([part[3] for part in parts]),
+                          np.concatenate([part[4] for part in parts]), 2 * L + 1, sum_type)
     best = np.argmin(sad, axis=1)
     interior = (best > 0) & (best < 2 * L)
     idx = np.arange(len(sel))
@@ -161,6 +152,37 @@ def subpixel_refine(left_img: np.ndarray, right_img: np.ndarray, uvl: np.ndarray
     sad_out[sel] = sad[idx, best]
     ok_out[sel] = good
     return u_out, sad_out, ok_out
+
+
+def _centre_sad(patch_l: np.ndarray, band: np.ndarray, n_shifts: int, sum_type) -> np.ndarray:
+    """SAD of each uint8 left patch (K,P,P) against the P-wide windows of its right band
+    (K,P,P+n_shifts-1) at every shift, each minus its centre pixel (ORB-SLAM2's
+    ComputeStereoMatches): Σ|(R − R_c) − (L − L_c)|, as a (K, n_shifts) float64 view.
+
+    int16 differences of uint8 pixels, one window shift at a time, with the keypoints on the
+    innermost axis: the patches are laid out (P,P,K) once, so every operation below runs over
+    contiguous rows of K values (in the (K,P,P) layout a shifted window is a strided view whose
+    inner runs are 11 pixels long, ~3x slower per subtraction; issue 8, docs/notes/s15-trackcpu.md).
+    The sums are exact integers (|differences| <= 510, P² of them fit ``sum_type``), so the
+    values do not depend on the order of the additions: the same SADs as the (K,P,P) loop."""
+    P = patch_l.shape[1]
+    w = P // 2
+    k = len(patch_l)
+    pl = patch_l.transpose(1, 2, 0).astype(np.int16, order="C")     # (P,P,K)
+    bd = band.transpose(1, 2, 0).astype(np.int16, order="C")         # (P,P+n_shifts-1,K)
+    pl -= pl[w, w]                                                   # the centred left patch
+    sad = np.empty((n_shifts, k), np.float64)
+    diff = np.empty((P, P, k), np.int16)  # one buffer for every shift (no temporaries)
+    # |differences| are >= 0: read as uint16 for the 16-bit sums (the same values, no cast)
+    flat = diff.reshape(P * P, k)
+    flat = flat.view(np.uint16) if sum_type == np.uint16 else flat
+    for shift in range(n_shifts):
+        # window at this shift minus the centred left patch, minus the window's centre pixel
+        np.subtract(bd[:, shift:shift + P], pl, out=diff)
+        diff -= bd[w, shift + w]
+        np.abs(diff, out=diff)
+        sad[shift] = flat.sum(axis=0, dtype=sum_type)
+    return sad.T
 
 
 def _zero_mean_sad(patch_l: np.ndarray, band: np.ndarray, n_shifts: int) -> np.ndarray:
