@@ -87,3 +87,16 @@ def test_subpixel_refine_unchanged_on_textured_images():
     assert got[2].sum() > 100  # most keypoints refine
     for g, x in zip(got, want):
         assert g.dtype == x.dtype and np.array_equal(g, x)
+
+
+@pytest.mark.parametrize("shape", [(40, 60), (11, 21), (30, 25)])
+def test_windows_is_sliding_window_view(shape):
+    rng = np.random.default_rng(3)
+    img = rng.integers(0, 256, shape, dtype=np.uint8)
+    for view in (img, img[:, ::2], img[1:, 2:]):          # contiguous and strided images
+        if view.shape[0] < 11 or view.shape[1] < 11:
+            continue
+        for rows, cols in ((11, 11), (11, min(21, view.shape[1]))):
+            got, want = stereo._windows(view, rows, cols), sliding_window_view(view, (rows, cols))
+            assert got.shape == want.shape and got.strides == want.strides and not got.flags.writeable
+            assert np.array_equal(got, want)
