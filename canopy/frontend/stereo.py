@@ -109,35 +109,35 @@ def subpixel_refine(left_img: np.ndarray, right_img: np.ndarray, uvl: np.ndarray
     sum_type = np.uint16 if (2 * w + 1) ** 2 * 510 < 1 << 16 else np.int32
     # patches of every level gathered first, then one SAD pass over all of them: each row's
     # arithmetic is the same, and one pass instead of one per level saves ~8x the numpy calls
-    parts = []
-    for lvl in levels:
-        sel = np.flatnonzero(octave == lvl)
-        s = scale_factors[lvl]
-        il, ir = pyr_l[int(lvl)], pyr_r[int(lvl)]
-        hh, ww = il.shape
-        xl = np.round(uvl[sel, 0] / s).astype(np.int64)
-        yl = np.round(uvl[sel, 1] / s).astype(np.int64)
-        xr0 = np.round(ur[sel] / s).astype(np.int64)
-        inside = ((yl - w >= 0) & (yl + w < hh) & (xl - w >= 0) & (xl + w < ww)
-                  & (xr0 - L - w >= 0) & (xr0 + L + w < ww))
-        sel, xl, yl, xr0 = sel[inside], xl[inside], yl[inside], xr0[inside]
-        if len(sel) == 0:
-            continue
+    # the keypoints by level (a stable sort: within a level in index order, as one flatnonzero per
+    # level gives them), their level coordinates and the window test in one pass each (the same
+    # per-element divisions by the level's scale); per level only the two window gathers
+    order = np.argsort(octave, kind="stable")
+    oc = octave[order]
+    s_all = scale_factors[oc]
+    xl = np.round(uvl[order, 0] / s_all).astype(np.int64)
+    yl = np.round(uvl[order, 1] / s_all).astype(np.int64)
+    xr0 = np.round(ur[order] / s_all).astype(np.int64)
+    at = np.searchsorted(levels, oc)
+    hh, ww = (np.array([pyr_l[int(lvl)].shape[i] for lvl in levels], np.int64)[at] for i in (0, 1))
+    inside = np.flatnonzero((yl - w >= 0) & (yl + w < hh) & (xl - w >= 0) & (xl + w < ww)
+                            & (xr0 - L - w >= 0) & (xr0 + L + w < ww))
+    if len(inside) == 0:
+        return u_out, sad_out, ok_out
+    sel, oc, s, xl, yl, xr0 = order[inside], oc[inside], s_all[inside], xl[inside], yl[inside], xr0[inside]
+    kept = np.unique(oc)
+    bounds = np.searchsorted(oc, kept).tolist() + [len(oc)]
+    patches, bands = [], []
+    for lvl, a, b in zip(kept.tolist(), bounds[:-1], bounds[1:]):
         # whole patch rows copied from sliding-window views (the same pixels as a gather of every
         # pixel by (row, column) index arrays, ~3x faster); uint8 until all levels are joined
-        patch_l = _windows(il, 2 * w + 1, 2 * w + 1)[yl - w, xl - w]             # (K,P,P)
-        band = _windows(ir, 2 * w + 1, 2 * (L + w) + 1)[yl - w, xr0 - L - w]   # (K,P,2L+2w+1)
-        parts.append((sel, xr0, np.full(len(sel), s), patch_l, band))
-    if not parts:
-        return u_out, sad_out, ok_out
-    sel, xr0, s = (np.concatenate([part[i] for part in parts]) for i in range(3))
+        patches.append(_windows(pyr_l[lvl], 2 * w + 1, 2 * w + 1)[yl[a:b] - w, xl[a:b] - w])           # (K,P,P)
+        bands.append(_windows(pyr_r[lvl], 2 * w + 1, 2 * (L + w) + 1)[yl[a:b] - w, xr0[a:b] - L - w])  # (K,P,2L+2w+1)
     if normalise == "mean":
-        patch_l = np.concatenate([part[3] for part in parts]).astype(np.int16)
-        band = np.concatenate([part[4] for part in parts]).astype(np.int16)
-        sad = _zero_mean_sad(patch_l, band, 2 * L + 1)
+        sad = _zero_mean_sad(np.concatenate(patches).astype(np.int16), np.concatenate(bands).astype(np.int16),
+                             2 * L + 1)
     else:
-        sad = _centre_sad(np.concatenate([part[3] for part in parts]),
-                          np.concatenate([part[4] for part in parts]), 2 * L + 1, sum_type)
+        sad = _centre_sad(np.concatenate(patches), np.concatenate(bands), 2 * L + 1, sum_type)
     best = np.argmin(sad, axis=1)
     interior = (best > 0) & (best < 2 * L)
     idx = np.arange(len(sel))
