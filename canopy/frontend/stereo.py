@@ -230,7 +230,9 @@ def stereo_candidates(left: Features, right: Features, tol: np.ndarray, octave_t
     by_level = order[np.argsort(right.octave[order], kind="stable")]   # by level, then row
     levels, first = np.unique(right.octave[by_level], return_index=True)
     ends = np.r_[first[1:], len(by_level)]
-    v_sorted = right.uv[by_level, 1]
+    # float64 once: searchsorted compares in the common type (float64 with the float64 bounds) and
+    # would cast the float32 rows again on every call
+    v_sorted = right.uv[by_level, 1].astype(np.float64)
     lo_v, hi_v = left.uv[:, 1] - tol, left.uv[:, 1] + tol
     # per left keypoint, one range of by_level per right level (empty where the levels are too far)
     lo = np.zeros((len(left), len(levels)), np.int64)
@@ -239,13 +241,17 @@ def stereo_candidates(left: Features, right: Features, tol: np.ndarray, octave_t
         near = np.flatnonzero(np.abs(left.octave - lvl) <= octave_tolerance)
         lo[near, g] = a + np.searchsorted(v_sorted[a:b], lo_v[near], side="left")
         hi[near, g] = a + np.searchsorted(v_sorted[a:b], hi_v[near], side="right")
-    counts = np.maximum(hi - lo, 0).reshape(-1)
-    total = int(counts.sum())
+    counts = np.maximum(hi - lo, 0)
+    per_left = counts.sum(axis=1)
+    counts = counts.reshape(-1)
+    total = int(per_left.sum())
     if total == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), row_rank
-    needle = np.repeat(np.arange(len(counts)), counts)
     pos = np.repeat(lo.reshape(-1) - np.cumsum(counts) + counts, counts) + np.arange(total)
-    return needle // len(levels), by_level[pos], row_rank
+    # the left keypoint of every pair: each one's pairs are consecutive (its ranges are laid out
+    # left keypoint by left keypoint), so one repeat by its total, not a repeat over every
+    # (keypoint, level) range and an integer division of every pair (issue 8)
+    return np.repeat(np.arange(len(left)), per_left), by_level[pos], row_rank
 
 
 def match_stereo(left: Features, right: Features | None, left_img: np.ndarray, right_img: np.ndarray,
