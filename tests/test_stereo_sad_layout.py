@@ -159,3 +159,17 @@ def test_windows_is_sliding_window_view(shape):
             got, want = stereo._windows(view, rows, cols), sliding_window_view(view, (rows, cols))
             assert got.shape == want.shape and got.strides == want.strides and not got.flags.writeable
             assert np.array_equal(got, want)
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_column_range_is_min_max_over_axis_0(dtype):
+    from canopy.frontend.matching import _column_range
+    rng = np.random.default_rng(5)
+    for n in (1, 2, 7, 2000):
+        uv = (rng.standard_normal((n, 2)) * 300).astype(dtype)
+        lo, hi = _column_range(uv)
+        for got, want in ((lo, uv.min(axis=0)), (hi, uv.max(axis=0))):
+            assert got.dtype == want.dtype and np.array_equal(got, want)
+    uv = np.array([[1.0, 2.0], [np.nan, 0.5], [3.0, 4.0]], dtype)
+    lo, hi = _column_range(uv)
+    assert np.isnan(lo[0]) and np.isnan(hi[0]) and lo[1] == 0.5 and hi[1] == 4.0
