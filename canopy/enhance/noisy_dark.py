@@ -48,6 +48,10 @@ def denoise_eps_factor(sigma: float, params: EnhanceParams) -> float:
     return params.denoise_eps_factor
 
 
-def denoise_frame(image: np.ndarray, sigma: float, params: EnhanceParams) -> np.ndarray:
-    """``denoise`` with the radius of ``params`` and the ε factor of ``denoise_eps_factor``."""
-    return denoise(image, sigma, params.denoise_radius, denoise_eps_factor(sigma, params))
+def denoise_frame(image: np.ndarray, sigma: float, params: EnhanceParams,
+                  eps_factor: float | None = None) -> np.ndarray:
+    """``denoise`` with the radius of ``params`` and the ε factor ``eps_factor`` (the left image's, for
+    the right image of a pair: ``canopy.enhance.snr.snr_eps_factor``), by default that of
+    ``denoise_eps_factor``."""
+    factor = denoise_eps_factor(sigma, params) if eps_factor is None else float(eps_factor)
+    return denoise(image, sigma, params.denoise_radius, factor)
