@@ -425,8 +425,10 @@ def test_make_enhancer_info(method):
     enhance = make_enhancer(EnhanceParams(method=method))
     out, info = enhance(img)
     assert out.shape == img.shape and out.dtype == np.uint8
-    assert set(info) == {"method", "requested", "mean_in", "std_in", "mean_out", "std_out", "noise_sigma", "gamma", "ms"}
+    assert set(info) == {"method", "requested", "mean_in", "std_in", "mean_out", "std_out", "noise_sigma", "gamma",
+                         "eps_factor", "ms"}
     assert info["requested"] == method and info["ms"] >= 0.0
+    assert info["eps_factor"] == (2.0 if method == "auto" else 0.0)  # the denoiser's default factor (s15-snr)
     assert info["method"] == ("afe>dn" if method == "auto" else method)  # LOL: dark and noisy
     assert (info["noise_sigma"] > 0) == (method == "auto")
     assert info["method"] in AUTO_DECISIONS + ENHANCE_METHODS

@@ -51,6 +51,7 @@ from canopy.enhance.dehaze import dark_channel, dehaze_dark_channel, dehaze_inve
 from canopy.enhance.noise import estimate_noise
 from canopy.enhance.noisy_dark import denoise_frame  # s14-darkrows hook: the ε factor by σ
 from canopy.enhance.params import EnhanceParams
+from canopy.enhance.snr import snr_eps_factor  # s15-snr hook: the ε factor by the frame's texture SNR
 
 
 def auto_statistics(image: np.ndarray, params: EnhanceParams) -> dict:
@@ -118,7 +119,8 @@ def apply_gamma(image: np.ndarray, gamma: float) -> np.ndarray:
 
 
 def apply_decision(image: np.ndarray, decision: str, params: EnhanceParams,
-                   noise_sigma: float | None = None, gamma: float = 1.0) -> tuple[np.ndarray, float]:
+                   noise_sigma: float | None = None, gamma: float = 1.0,
+                   eps_factor: float | None = None) -> tuple[np.ndarray, float]:
     """Apply an ``auto`` decision (one of AUTO_DECISIONS) to ``image``.
 
     ``X>dn``: method X, the exposure curve of power ``gamma`` (``auto_full``
@@ -134,7 +136,8 @@ def apply_decision(image: np.ndarray, decision: str, params: EnhanceParams,
     out = apply_gamma(out, gamma)
     sigma = estimate_noise(out, rows_fraction=params.noise_rows_fraction) if noise_sigma is None \
         else float(noise_sigma)
-    return denoise_frame(out, sigma, params), sigma
+    factor = snr_eps_factor(out, sigma, params) if eps_factor is None else float(eps_factor)
+    return denoise_frame(out, sigma, params, factor), sigma
 
 
 def auto_full(image: np.ndarray, params: EnhanceParams | None = None) -> tuple[np.ndarray, str, float]:
@@ -145,7 +148,15 @@ def auto_full(image: np.ndarray, params: EnhanceParams | None = None) -> tuple[n
 
 
 def auto_treat(image: np.ndarray, params: EnhanceParams | None = None) -> tuple[np.ndarray, str, float, float]:
-    """``auto``: (image, decision, σ used for denoising or 0, exposure γ or 1).
+    """``auto``: (image, decision, σ used for denoising or 0, exposure γ or 1); ``auto_treat_factor``'s
+    first four."""
+    return auto_treat_factor(image, params)[:4]
+
+
+def auto_treat_factor(image: np.ndarray, params: EnhanceParams | None = None
+                      ) -> tuple[np.ndarray, str, float, float, float]:
+    """``auto``: (image, decision, σ used for denoising or 0, exposure γ or 1, the denoiser's ε factor
+    or 0; ``canopy.enhance.snr``).
 
     1. The base decision of ``auto_decide`` (darkness, haze, contrast).
     2. Haze guard: the dark channel prior fails on scenes it does not model
@@ -189,7 +200,7 @@ def auto_treat(image: np.ndarray, params: EnhanceParams | None = None) -> tuple[
         decision = "afe"
         out = _APPLY[decision](image, params)
     if not dark and not params.auto_denoise_lit:
-        return out, decision, 0.0, 1.0
+        return out, decision, 0.0, 1.0, 0.0
     gamma = 1.0
     if dark:
         gamma = exposure_gamma(out, params.auto_dark_target_mean, params.auto_dark_min_gamma)
@@ -198,9 +209,9 @@ def auto_treat(image: np.ndarray, params: EnhanceParams | None = None) -> tuple[
     if dark:
         sigma = max(sigma, params.auto_dark_min_sigma)
     if dark or (params.auto_denoise_lit and sigma > params.auto_noise_sigma):
-        return (denoise_frame(out, sigma, params), decision + ">dn", sigma,
-                gamma)
-    return out, decision, 0.0, 1.0
+        factor = snr_eps_factor(out, sigma, params)
+        return denoise_frame(out, sigma, params, factor), decision + ">dn", sigma, gamma, factor
+    return out, decision, 0.0, 1.0, 0.0
 
 
 def auto(image: np.ndarray, params: EnhanceParams | None = None) -> tuple[np.ndarray, str]:

@@ -7,7 +7,7 @@ from typing import Callable
 import numpy as np
 
 from canopy.enhance.agcwd import agcwd_unsharp
-from canopy.enhance.auto import apply_decision, auto_treat
+from canopy.enhance.auto import apply_decision, auto_treat_factor
 from canopy.enhance.baselines import clahe, histogram_equalise, none
 from canopy.enhance.common import check_image, mean_std
 from canopy.enhance.dehaze import dehaze_dark_channel, dehaze_inverted
@@ -30,8 +30,9 @@ def make_enhancer(params: EnhanceParams | None = None) -> Callable[[np.ndarray],
     ``info``: ``method`` (the method applied; for ``auto`` its per-frame
     decision), ``requested`` (``params.method``), ``mean_in``, ``std_in``,
     ``mean_out``, ``std_out`` (grey level / luma), ``noise_sigma`` (the σ
-    the denoiser used, 0 if none), ``gamma`` (the exposure curve's power, 1 if none) and ``ms`` (time of the
-    enhancement call itself, statistics excluded).
+    the denoiser used, 0 if none), ``gamma`` (the exposure curve's power, 1 if none), ``eps_factor``
+    (the denoiser's ε factor, 0 if none) and ``ms`` (time of the enhancement call itself, statistics
+    excluded).
     """
     params = params or EnhanceParams()
     params.validate()
@@ -39,30 +40,33 @@ def make_enhancer(params: EnhanceParams | None = None) -> Callable[[np.ndarray],
 
     if requested == "auto":
         def apply(image):
-            return auto_treat(image, params)
+            return auto_treat_factor(image, params)
     else:
         fn = METHOD_FUNCTIONS[requested]
 
         def apply(image):
-            return fn(image, params), requested, 0.0, 1.0
+            return fn(image, params), requested, 0.0, 1.0, 0.0
 
     def enhance(image: np.ndarray, method: str | None = None,
-                noise_sigma: float | None = None, gamma: float = 1.0) -> tuple[np.ndarray, dict]:
+                noise_sigma: float | None = None, gamma: float = 1.0,
+                eps_factor: float | None = None) -> tuple[np.ndarray, dict]:
         """``method`` forces a decision (a method or an ``auto`` decision such
         as ``agri>dn``), e.g. the right image of a stereo pair gets the
         treatment ``auto`` chose for the left one; ``noise_sigma`` and
         ``gamma`` then pass the left image's noise σ and exposure γ so both
-        are treated alike (``pair_arguments(info)``)."""
+        are treated alike (``pair_arguments(info)``), and ``eps_factor`` the
+        denoiser's ε factor (``canopy.enhance.snr``)."""
         image = check_image(image)
         start = time.perf_counter()
-        gamma_used = 1.0
+        gamma_used, factor = 1.0, 0.0
         if method is None:
-            out, used, sigma, gamma_used = apply(image)
+            out, used, sigma, gamma_used, factor = apply(image)
         elif method in METHOD_FUNCTIONS:
             out, used, sigma = METHOD_FUNCTIONS[method](image, params), method, 0.0
         elif method in AUTO_DECISIONS:
-            out, sigma = apply_decision(image, method, params, noise_sigma, gamma)
+            out, sigma = apply_decision(image, method, params, noise_sigma, gamma, eps_factor or None)
             used, gamma_used = method, (gamma if method.endswith(">dn") else 1.0)
+            factor = (eps_factor or 0.0) if method.endswith(">dn") else 0.0
         else:
             raise ConfigError("method", f"unknown enhancement {method!r}; "
                                         f"known: {', '.join(sorted(set(METHOD_FUNCTIONS) | set(AUTO_DECISIONS)))}")
@@ -70,12 +74,14 @@ def make_enhancer(params: EnhanceParams | None = None) -> Callable[[np.ndarray],
         mean_in, std_in = mean_std(image)
         mean_out, std_out = mean_std(out)
         return out, {"method": used, "requested": requested, "mean_in": mean_in, "std_in": std_in,
-                     "mean_out": mean_out, "std_out": std_out, "noise_sigma": sigma, "gamma": gamma_used, "ms": ms}
+                     "mean_out": mean_out, "std_out": std_out, "noise_sigma": sigma, "gamma": gamma_used,
+                     "eps_factor": factor, "ms": ms}
 
     return enhance
 
 
 def pair_arguments(info: dict) -> dict:
     """What the right image of a stereo pair is enhanced with, from the left image's ``info``:
-    the same decision, noise σ and exposure γ (``enhance(right, **pair_arguments(info))``)."""
-    return {"method": info["method"], "noise_sigma": info["noise_sigma"], "gamma": info.get("gamma", 1.0)}
+    the same decision, noise σ, exposure γ and ε factor (``enhance(right, **pair_arguments(info))``)."""
+    return {"method": info["method"], "noise_sigma": info["noise_sigma"], "gamma": info.get("gamma", 1.0),
+            "eps_factor": info.get("eps_factor") or None}

@@ -21,11 +21,13 @@ itself are averaged) keeps that texture and removes the bias: dark-rows g1-b0-hi
 goes 9.99 → 11.14 mm (its bar is 11.2), and a third noise draw of dark-rows goes 5.97 → 8.22 mm: on
 that 150-frame cell the scale moves by ±0.2 % from draw to draw (docs/notes/s14-darkrows.md, §3).
 
-Off in every shipped config: where the light is 6 %, the same σ gate opens on frames whose texture is
-not above the noise, and the weaker filter leaves noise corners there: haze-row at 6 % light with the
-noisy sensor 96 % tracked, 88.8 mm → 13 %, 6.0 m; day-loop at 6 % 43.7 → 62.0 mm (the lead's full
-preset grid, docs/notes/s14-lead.md). A factor that follows the frame's signal-to-noise, not one σ
-gate, is what is left to try.
+Alone (σ gate only) it is off in every shipped config: where the light is 6 %, the same σ gate opens
+on frames whose texture is not above the noise, and the weaker filter leaves noise corners there:
+haze-row at 6 % light with the noisy sensor 96 % tracked, 88.8 mm → 13 %, 6.0 m; day-loop at 6 %
+43.7 → 62.0 mm (the lead's full preset grid, docs/notes/s14-lead.md). configs/synthetic.yaml turns the
+gate on together with ``canopy.enhance.snr`` (s15-snr), which gives the noisy factor only to frames
+whose texture stands above the noise (``snr_eps_factor``; this module's ``denoise_eps_factor`` is then
+its answer over the gate when that rule is off).
 
 The gate is the σ the denoiser measures, so the clean presets never reach it (every dark frame of the
 clean day-loop, dusk-loop, haze-row and dark-rows: ≤ 9.2, see the note) and keep the factor 2 bit for
@@ -48,6 +50,10 @@ def denoise_eps_factor(sigma: float, params: EnhanceParams) -> float:
     return params.denoise_eps_factor
 
 
-def denoise_frame(image: np.ndarray, sigma: float, params: EnhanceParams) -> np.ndarray:
-    """``denoise`` with the radius of ``params`` and the ε factor of ``denoise_eps_factor``."""
-    return denoise(image, sigma, params.denoise_radius, denoise_eps_factor(sigma, params))
+def denoise_frame(image: np.ndarray, sigma: float, params: EnhanceParams,
+                  eps_factor: float | None = None) -> np.ndarray:
+    """``denoise`` with the radius of ``params`` and the ε factor ``eps_factor`` (the left image's, for
+    the right image of a pair: ``canopy.enhance.snr.snr_eps_factor``), by default that of
+    ``denoise_eps_factor``."""
+    factor = denoise_eps_factor(sigma, params) if eps_factor is None else float(eps_factor)
+    return denoise(image, sigma, params.denoise_radius, factor)

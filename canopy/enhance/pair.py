@@ -26,6 +26,7 @@ from canopy.enhance.factory import METHOD_FUNCTIONS
 from canopy.enhance.noise import estimate_noise
 from canopy.enhance.noisy_dark import denoise_frame  # s14-darkrows hook: the ε factor by σ
 from canopy.enhance.params import EnhanceParams
+from canopy.enhance.snr import snr_eps_factor  # s15-snr hook: one ε factor for both images, from the left
 
 
 class PairEnhancer:
@@ -61,35 +62,36 @@ class PairEnhancer:
             decision = "afe"  # the haze guard of auto_full, step 2
             base_l, base_r = self._both(lambda im: _APPLY[decision](im, p), left, right)
         if not dark and not p.auto_denoise_lit:
-            return base_l, base_r, decision, 0.0, 1.0
+            return base_l, base_r, decision, 0.0, 1.0, 0.0
         gamma = exposure_gamma(base_l, p.auto_dark_target_mean, p.auto_dark_min_gamma) if dark else 1.0
         lifted_l = apply_gamma(base_l, gamma)
         sigma = estimate_noise(lifted_l, rows_fraction=p.noise_rows_fraction)
         if dark:
             sigma = max(sigma, p.auto_dark_min_sigma)
         elif not sigma > p.auto_noise_sigma:
-            return base_l, base_r, decision, 0.0, 1.0
+            return base_l, base_r, decision, 0.0, 1.0, 0.0
+        factor = snr_eps_factor(lifted_l, sigma, p)
 
         def finish(pair_side):
             image, lifted = pair_side
             lifted = apply_gamma(image, gamma) if lifted is None else lifted
-            return denoise_frame(lifted, sigma, p)
+            return denoise_frame(lifted, sigma, p, factor)
         out_l, out_r = self._both(finish, (base_l, lifted_l), (base_r, None))
-        return out_l, out_r, decision + ">dn", sigma, gamma
+        return out_l, out_r, decision + ">dn", sigma, gamma, factor
 
     def __call__(self, left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
         left, right = check_image(left, "left image"), check_image(right, "right image")
         start = time.perf_counter()
         p = self.params
         if p.method == "auto":
-            out_l, out_r, used, sigma, gamma = self._auto(left, right)
+            out_l, out_r, used, sigma, gamma, factor = self._auto(left, right)
         else:
             fn = METHOD_FUNCTIONS[p.method]
             out_l, out_r = self._both(lambda im: fn(im, p), left, right)
-            used, sigma, gamma = p.method, 0.0, 1.0
+            used, sigma, gamma, factor = p.method, 0.0, 1.0, 0.0
         ms = (time.perf_counter() - start) * 1e3
         mean_in, std_in = mean_std(left)
         mean_out, std_out = mean_std(out_l)
         return out_l, out_r, {"method": used, "requested": p.method, "mean_in": mean_in, "std_in": std_in,
                               "mean_out": mean_out, "std_out": std_out, "noise_sigma": sigma, "gamma": gamma,
-                              "ms": ms}
+                              "eps_factor": factor, "ms": ms}

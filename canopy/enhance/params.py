@@ -71,6 +71,14 @@ class EnhanceParams:
     # (0 = off) get ε = (denoise_eps_factor_noisy·σ)² instead
     denoise_noisy_sigma: float = 0.0
     denoise_eps_factor_noisy: float = 2.0
+    # s15-snr (canopy.enhance.snr): over that σ gate, the factor follows the frame's texture SNR (top
+    # ``denoise_snr_quantile`` of the 3×3-window variances at 1/``denoise_snr_downsample`` scale over the
+    # noise variance there): denoise_eps_factor at SNR <= denoise_snr_low, denoise_eps_factor_noisy at
+    # >= denoise_snr_high, linear between; denoise_snr_high 0 = off (s14's σ-only rule)
+    denoise_snr_low: float = 0.0
+    denoise_snr_high: float = 0.0
+    denoise_snr_downsample: int = 4
+    denoise_snr_quantile: float = 0.9
     # threads for the two images of a pair (canopy.enhance.pair): 1 = one after the other. OpenCV
     # already spreads the big filters over the cores, and on a busy machine (the pipeline's other
     # actors) a second thread only adds CPU (dark KITTI pair: 5.1 vs 4.7 ms CPU at load 8); 2 pays
@@ -97,12 +105,13 @@ class EnhanceParams:
                      "auto_low_std", "auto_haze_dark", "fast_omega", "denoise_eps_factor",
                      "auto_dehaze_max_clip", "auto_noise_sigma", "auto_dark_min_sigma", "noise_rows_fraction",
                      "auto_dark_target_mean", "auto_dark_min_gamma",
-                     "denoised_fallback_weight", "denoise_noisy_sigma", "denoise_eps_factor_noisy"):
+                     "denoised_fallback_weight", "denoise_noisy_sigma", "denoise_eps_factor_noisy",
+                     "denoise_snr_low", "denoise_snr_high", "denoise_snr_quantile"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
                 bad(name, "must be a finite number")
         for name in ("block", "n_dark_pixels", "clahe_tiles", "auto_downsample", "min_keypoints", "denoise_radius",
-                     "afe_hist_row_step", "pair_threads"):
+                     "afe_hist_row_step", "pair_threads", "denoise_snr_downsample"):
             if isinstance(getattr(self, name), bool) or not isinstance(getattr(self, name), int):
                 bad(name, "must be an integer")
         for name in ("adaptive_fast", "auto_denoise_lit", "fill_denoised_features"):
@@ -169,6 +178,16 @@ class EnhanceParams:
             bad("denoise_eps_factor_noisy", "must be > 0")
         if not self.denoise_noisy_sigma >= 0.0:
             bad("denoise_noisy_sigma", "must be >= 0 (0 = off)")
+        if not self.denoise_snr_low >= 0.0:
+            bad("denoise_snr_low", "must be >= 0")
+        if not self.denoise_snr_high >= 0.0:
+            bad("denoise_snr_high", "must be >= 0 (0 = off)")
+        if self.denoise_snr_high > 0.0 and not self.denoise_snr_high > self.denoise_snr_low:
+            bad("denoise_snr_high", f"must exceed denoise_snr_low ({self.denoise_snr_low}) when on")
+        if self.denoise_snr_downsample < 1:
+            bad("denoise_snr_downsample", "must be >= 1")
+        if not 0.0 < self.denoise_snr_quantile < 1.0:
+            bad("denoise_snr_quantile", "must be in (0, 1)")
         if not self.fast_omega > 0.0:
             bad("fast_omega", "must be > 0")
         if self.min_keypoints < 0:
