@@ -29,7 +29,7 @@ from contextlib import contextmanager
 import numpy as np
 
 from canopy.frontend.geometry import project_stereo, se3_inv
-from canopy.frontend.matching import as_words, match_in_window
+from canopy.frontend.matching import as_words, band_pairs, best_two, hamming_pairs, unique_by_reference
 
 _COS_MAX_VIEW = 0.5   # ORBmatcher::Fuse: a viewing angle over 60 deg from the point's normal is skipped
 
@@ -70,7 +70,7 @@ def fuse_matches(rec, pos: np.ndarray, desc: np.ndarray, ref_centres: np.ndarray
     ``ref_centres`` (K,3: the creating keyframe's centre, the point's viewing direction) is
     matched to the keypoint of least Hamming distance (<= ``max_hamming``) within
     sqrt(chi2) x pixel_sigma x scale^octave px of its projection (the reprojection test
-    e^2 < chi2 sigma^2 of Fuse); each keypoint keeps its closest point.
+    e^2 < chi2 sigma^2 of Fuse; no ratio test, as Fuse); each keypoint keeps its closest point.
     Returns (point indices, keypoint rows)."""
     empty = (np.zeros(0, np.int64), np.zeros(0, np.int64))
     pos = np.asarray(pos, np.float64).reshape(-1, 3)
@@ -85,13 +85,29 @@ def fuse_matches(rec, pos: np.ndarray, desc: np.ndarray, ref_centres: np.ndarray
           & (proj[:, 1] < calib.height) & (cos >= _COS_MAX_VIEW))
     if not ok.any():
         return empty
-    r_scale = float(scale) ** np.asarray(rec.octave, np.float64)
-    radius = np.full(len(pos), np.sqrt(chi2) * pixel_sigma)
-    # ratio 1: no Lowe test (Fuse keeps the best within the window); ties are ambiguous
-    q, r, _ = match_in_window(proj[:, :2], as_words(np.asarray(desc, np.uint8)), radius,
-                              np.asarray(rec.uv, np.float64), as_words(rec.descriptors), max_hamming, 1.0,
-                              q_mask=ok, r_scale=r_scale)
-    return q.astype(np.int64), r.astype(np.int64)
+    # candidates: the keyframe's keypoints sorted by u, each projection's band of u within the
+    # widest window (a few hundred points against ~2000 keypoints: cheaper than a cell grid per
+    # call), then the circle of the keypoint's own octave, as ORB-SLAM scales the window
+    sel = np.flatnonzero(ok)
+    uv = np.asarray(rec.uv, np.float64)
+    rad = np.sqrt(chi2) * pixel_sigma * float(scale) ** np.asarray(rec.octave, np.float64)
+    order = np.argsort(uv[:, 0], kind="stable")
+    rmax = float(rad.max())
+    qi, rj = band_pairs(proj[sel, 0] - rmax, proj[sel, 0] + rmax, uv[order, 0])
+    qi, rj = sel[qi], order[rj]
+    d2 = ((proj[qi, :2] - uv[rj]) ** 2).sum(1)
+    inside = d2 <= rad[rj] ** 2
+    qi, rj = qi[inside], rj[inside]
+    if len(qi) == 0:
+        return empty
+    dist = hamming_pairs(as_words(np.asarray(desc, np.uint8)), as_words(rec.descriptors), qi, rj)
+    best, best_d, second_d = best_two(qi, rj, dist, len(pos))
+    # no ratio test (Fuse keeps the best in the window), but a tie of two keypoints is ambiguous
+    q = np.flatnonzero((best >= 0) & (best_d <= max_hamming) & (best_d < second_d))
+    if len(q) == 0:
+        return empty
+    keep = unique_by_reference(q, best[q], best_d[q])   # each keypoint for its closest point
+    return q[keep].astype(np.int64), best[q[keep]].astype(np.int64)
 
 
 def fuse_into(mapper, rec, ids: np.ndarray, scale: float) -> tuple[int, int]:
