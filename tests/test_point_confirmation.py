@@ -141,9 +141,12 @@ def test_unconfirmed_points_can_be_kept_out_of_local_ba():
     assert not np.allclose(moved[True][1], moved[False][1])
 
 
-def test_a_point_duplicating_a_stereo_landmark_is_merged_into_it():
+@pytest.mark.parametrize("merge", [True, False])
+def test_a_point_duplicating_a_stereo_landmark_is_merged_into_it(merge):
+    """With triangulate_fuse_merge the duplicate's observations move to the stereo landmark;
+    without, the duplicate only leaves the map."""
     rng = np.random.default_rng(7)
-    mapper, _, X, n_near = _run(_params(), 2, _same, rng)
+    mapper, _, X, n_near = _run(_params(triangulate_fuse_merge=merge), 2, _same, rng)
     lid = min(i for i in mapper.landmarks if i >= BASE)
     lm = mapper.landmarks[lid]
     kf1 = mapper.keyframes[1]
@@ -163,7 +166,10 @@ def test_a_point_duplicating_a_stereo_landmark_is_merged_into_it():
     added, merged = fuse_into(mapper, kf0, np.array([lid]), 1.2)
     assert (added, merged) == (0, 1)
     assert lid not in mapper.landmarks
-    assert stereo.obs[1] == row and kf1.landmark[row] == stereo_id
+    if merge:
+        assert stereo.obs[1] == row and kf1.landmark[row] == stereo_id
+    else:
+        assert 1 not in stereo.obs and kf1.landmark[row] == -1
 
 
 def test_fuse_matches_respects_the_window_and_descriptors():

@@ -97,6 +97,9 @@ class MappingParams:
     # keyframes. Off: bit-identical.
     triangulate_fuse: bool = False
     triangulate_fuse_neighbours: int = 6
+    # a triangulated landmark found on a keypoint that has a landmark already duplicates it: True
+    # moves its observations to that landmark (MapPoint::Replace), False only drops it
+    triangulate_fuse_merge: bool = True
     # tracking's local map leaves out triangulated landmarks seen by fewer than
     # triangulate_min_observations keyframes (s14: tracking using them early is what hurt)
     triangulate_confirm: bool = False

@@ -144,8 +144,11 @@ def fuse_into(mapper, rec, ids: np.ndarray, scale: float) -> tuple[int, int]:
             added += 1
         elif other != lm.id and other in mapper.landmarks:
             keep = mapper.landmarks[other]
-            _merge(mapper, lm, keep)
-            touched.append(keep)
+            if p.triangulate_fuse_merge:
+                _merge(mapper, lm, keep)
+                touched.append(keep)
+            else:   # the duplicate only leaves the map
+                mapper._delete_landmark(lm.id)
             merged += 1
     mapper._update_descriptors([lm for lm in touched if lm.id in mapper.landmarks])
     return added, merged
