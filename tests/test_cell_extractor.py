@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from canopy.config import load_run_config
-from canopy.frontend.cell_extractor import (CellExtractor, _best_per_key, _descending_key, harris_responses, ic_angles, level_quotas,
+from canopy.frontend.cell_extractor import (CellExtractor, _best_ranks, _descending_key, harris_responses, ic_angles, level_quotas,
                                             make_extractor, quadtree_select)
 from canopy.frontend.features import OrbExtractor
 from canopy.frontend.params import TrackingParams
@@ -164,12 +164,13 @@ def test_quadtree_select_spreads_to_the_quota():
     assert len(quadtree_select(x[:10], y[:10], score[:10], 0, 0, 400, 200, 60)) == 10
 
 
-def test_best_per_key_keeps_the_best_ranked_point_of_every_key():
+def test_best_ranks_marks_the_best_ranked_point_of_every_key():
     rng = np.random.default_rng(3)
     key = rng.integers(0, 50, 400) * 7            # sparse keys, most repeated
     rank = rng.permutation(400)
     ref = sorted(min(np.flatnonzero(key == k), key=lambda i: rank[i]) for k in np.unique(key))
-    np.testing.assert_array_equal(_best_per_key(key, rank), ref)
+    marked = _best_ranks(key, rank, int(key.max()) + 1)   # indexed by rank
+    np.testing.assert_array_equal(np.sort(np.argsort(rank)[marked]), ref)
 
 
 @pytest.mark.parametrize("ranking, share", [("harris2x", 0.95), ("fast", 0.8)])

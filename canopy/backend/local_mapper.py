@@ -23,11 +23,12 @@ from operator import attrgetter
 import gtsam
 import numpy as np
 
+from canopy.backend.keyframe_culling import cull_redundant_keyframes
 from canopy.backend.local_ba import LocalBundleAdjustmentMixin
 from canopy.backend.map_store import Keyframe, Landmark, LandmarkStore, LineLandmark, MapStoreAccess, local_map_update
 from canopy.backend.params import MappingParams
 from canopy.backend import point_confirmation as confirmation
-from canopy.backend.still_window import window_neighbours
+from canopy.backend.still_window import bounded_fixed, descriptor_observations, window_neighbours
 from canopy.backend.triangulation import check_tracker_ids, pair_gates, triangulate_with_partners, \
     triangulation_partners
 from canopy.frontend.matching import as_words, _popcount64
@@ -67,6 +68,9 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         # keypoints not to triangulate, per keyframe (mapping.triangulate_skip_stereo)
         self._no_triangulation: dict[int, np.ndarray] = {}
         self.n_triangulated = 0
+        # keyframes removed by mapping.keyframe_culling: index -> (parent, T_parent_k, timestamp) (canopy.backend.keyframe_culling)
+        self.culled_keyframes: dict[int, tuple[int, np.ndarray, float]] = {}
+        self.n_keyframes_culled = 0
 
     # ----------------------------------------------------------------- public API
     def insert_keyframe(self, kf: KeyframeData) -> LocalMapUpdate:
@@ -84,18 +88,28 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         self.last_window = (local, fixed)  # for diagnosis (benchmarks/diagnose_drift.py)
         timings["window"] = _ms(t0)
         t0 = time.perf_counter()
-        if len(local) >= 1 and (len(fixed) >= 1 or len(local) >= 2):
+        # BA's fixed set bounded by mapping.window_max_fixed (all when 0); tracking's update keeps every
+        # keyframe's landmarks (a landmark missing there is made again by tracking from its noisy pose)
+        ba_fixed = bounded_fixed(self, rec, local, fixed)
+        if len(local) >= 1 and (len(ba_fixed) >= 1 or len(local) >= 2):
             p = self.params
             if p.triangulate_new_points and p.triangulate_confirm and not p.triangulate_confirm_ba:
+                # mapping.triangulate_confirm_ba off: the unconfirmed triangulated landmarks sit out BA
                 with confirmation.hidden_from_ba(self, confirmation.pending_ids(
                         self.landmarks, p.triangulate_id_base, p.triangulate_min_observations, rec.segment)):
-                    self._bundle_adjust(local, fixed, kf.scale_factor)
+                    self._bundle_adjust(local, ba_fixed, kf.scale_factor)
             else:
-                self._bundle_adjust(local, fixed, kf.scale_factor)
+                self._bundle_adjust(local, ba_fixed, kf.scale_factor)
         timings["ba"] = _ms(t0)
         t0 = time.perf_counter()
         self._cull(rec)
         timings["cull"] = _ms(t0)
+        if self.params.keyframe_culling:  # ORB-SLAM's KeyFrameCulling, after local BA as there
+            t0 = time.perf_counter()
+            if cull_redundant_keyframes(self, rec, self._covisible(rec)):
+                local = [k for k in local if k in self.keyframes]
+                fixed = [k for k in fixed if k in self.keyframes]
+            timings["kfcull"] = _ms(t0)
         t0 = time.perf_counter()
         update = self._make_update(rec, local, fixed)
         timings["update"] = _ms(t0)
@@ -225,22 +239,27 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         """ORB-SLAM's distinctive descriptor: the observation with the least median distance to
         the others. Batched over landmarks with the same number of observations."""
         by_count: dict[int, list[Landmark]] = {}
+        m = self.params.descriptor_max_observations   # 0: every observation (ORB-SLAM's)
+        obs_of = {}
         for lm in landmarks:
             if len(lm.obs) >= 3:
-                by_count.setdefault(len(lm.obs), []).append(lm)
+                by_count.setdefault(min(len(lm.obs), m) if m else len(lm.obs), []).append(lm)
+                if m and len(lm.obs) > m:
+                    obs_of[lm.id] = descriptor_observations(lm.obs, m)
         if not by_count:
             return
+        obs_for = (lambda lm: obs_of.get(lm.id, lm.obs)) if obs_of else _OBS
         # every observation's descriptor by one gather from the observing keyframes' descriptor
         # arrays laid end to end (np.array over nested lists of 32-byte rows cost ~2 ms per KITTI keyframe)
         # the observations' keyframes and keypoint rows chained at C level (a generator per
         # observation cost ~1 ms per KITTI keyframe), the keyframes' offsets by a lookup table
-        kf_ids = sorted(set(chain.from_iterable(map(_OBS, chain.from_iterable(by_count.values())))))
+        kf_ids = sorted(set(chain.from_iterable(map(obs_for, chain.from_iterable(by_count.values())))))
         table = np.concatenate([self.keyframes[k].descriptors for k in kf_ids])
         start = np.cumsum([0] + [len(self.keyframes[k].descriptors) for k in kf_ids[:-1]])
         row_of_kf = np.zeros(kf_ids[-1] + 1, np.int64)
         row_of_kf[kf_ids] = start
         for n, group in by_count.items():
-            obs = list(map(_OBS, group))
+            obs = list(map(obs_for, group))
             rows = row_of_kf[np.fromiter(chain.from_iterable(obs), np.int64, len(group) * n)] + \
                 np.fromiter(chain.from_iterable(map(dict.values, obs)), np.int64, len(group) * n)
             desc = table[rows].reshape(len(group), n, 32)

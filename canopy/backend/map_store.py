@@ -243,13 +243,27 @@ class MapStoreAccess:
     def keyframe_trajectory(self):
         from shared.types import Trajectory
 
-        idx = sorted(self.keyframes)
-        stamps = [self.keyframes[i].timestamp for i in idx]
-        poses = [self.keyframes[i].T_world_cam for i in idx] if idx else np.zeros((0, 4, 4))
+        culled = self._culled_poses()
+        idx = sorted(set(self.keyframes) | set(culled))
+        stamps = [self.keyframes[i].timestamp if i in self.keyframes else self.culled_keyframes[i][2] for i in idx]
+        poses = [self.keyframes[i].T_world_cam if i in self.keyframes else culled[i] for i in idx] \
+            if idx else np.zeros((0, 4, 4))
         return Trajectory(np.asarray(stamps, float), np.asarray(poses, float), meta={"indices": idx})
 
     def keyframe_poses(self) -> dict[int, np.ndarray]:
-        return {i: k.T_world_cam.copy() for i, k in self.keyframes.items()}
+        """Every keyframe's pose, culled ones (mapping.keyframe_culling) too, through their parents: the
+        frames tracked against a culled keyframe keep following the map's corrections."""
+        poses = {i: k.T_world_cam.copy() for i, k in self.keyframes.items()}
+        poses.update(self._culled_poses())
+        return poses
+
+    def _culled_poses(self) -> dict[int, np.ndarray]:
+        culled = getattr(self, "culled_keyframes", None)
+        if not culled:
+            return {}
+        from canopy.backend.keyframe_culling import culled_pose
+        out = {k: culled_pose(self.keyframes, culled, k) for k in culled}
+        return {k: T for k, T in out.items() if T is not None}
 
     def map_points(self) -> np.ndarray:
         if not self.landmarks:
@@ -289,6 +303,11 @@ class MapStoreAccess:
             in_set = np.zeros(max(int(e_kf.max()), max(kf_set)) + 1, bool)
             in_set[list(kf_set)] = True
             keep = in_set[e_kf]
+        p = getattr(self, "params", None)
+        if getattr(p, "window_max_fixed", 0) > 0 or getattr(p, "keyframe_culling", False):
+            # BA sees part of the landmarks' observations: only depth-constrained ones move (still_window)
+            from canopy.backend.still_window import depth_constrained
+            return depth_constrained(self, lm_ids, e_kf[keep], e_lm[keep], e_kp[keep])
         return lm_ids, e_kf[keep], e_lm[keep], e_kp[keep]
 
     def _delete_landmark(self, lid: int) -> None:

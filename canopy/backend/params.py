@@ -16,6 +16,20 @@ class MappingParams:
     # neighbours whose view is within this many pixels of a keyframe already in the window add no
     # geometry and stay fixed (canopy.backend.still_window); 0: off (ORB-SLAM's window)
     window_min_view_change_px: float = 0.0
+    # at most this many fixed keyframes in local BA, the best covisible with the window's landmarks (0: all,
+    # ORB-SLAM's), and a landmark's distinctive descriptor from its newest descriptor_max_observations
+    # observations (0: all). Both bound local mapping's cost per keyframe on a still camera
+    # (canopy.backend.still_window, docs/notes/s15-stillcost.md)
+    window_max_fixed: int = 0
+    descriptor_max_observations: int = 0
+    # ORB-SLAM's KeyFrameCulling (canopy.backend.keyframe_culling): after local BA, a covisible keyframe whose
+    # landmarks are more than keyframe_culling_redundancy seen by keyframe_culling_observers other keyframes at
+    # the same or a finer scale goes; the newest keyframe_culling_keep_recent keyframes are never culled.
+    # Off: no keyframe is ever removed (bit-identical)
+    keyframe_culling: bool = False
+    keyframe_culling_redundancy: float = 0.9
+    keyframe_culling_observers: int = 3
+    keyframe_culling_keep_recent: int = 0
     covisibility_min_shared: int = 15    # landmarks two keyframes must share to be neighbours
     ba_iterations: int = 10              # Levenberg-Marquardt iterations per BA pass
     ba_passes: int = 2                   # ORB-SLAM: robust pass, drop outliers, refine again
@@ -113,6 +127,12 @@ class MappingParams:
 
         need(self.window_size >= 2, "window_size", "must be >= 2")
         need(self.window_min_view_change_px >= 0, "window_min_view_change_px", "must be >= 0")
+        need(self.window_max_fixed >= 0, "window_max_fixed", "must be >= 0 (0: all)")
+        need(self.descriptor_max_observations == 0 or self.descriptor_max_observations >= 3,
+             "descriptor_max_observations", "must be 0 (all) or >= 3")
+        need(0 < self.keyframe_culling_redundancy <= 1, "keyframe_culling_redundancy", "must be in (0, 1]")
+        need(self.keyframe_culling_observers >= 1, "keyframe_culling_observers", "must be >= 1")
+        need(self.keyframe_culling_keep_recent >= 0, "keyframe_culling_keep_recent", "must be >= 0")
         need(self.covisibility_min_shared >= 1, "covisibility_min_shared", "must be >= 1")
         need(self.ba_iterations >= 1, "ba_iterations", "must be >= 1")
         need(self.ba_passes >= 1, "ba_passes", "must be >= 1")

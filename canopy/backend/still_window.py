@@ -62,3 +62,61 @@ def window_neighbours(mapper, rec, neigh: list[int]) -> list[int]:
             chosen.append(k)
             poses.append(T)
     return chosen
+
+
+def bounded_fixed(mapper, rec, local: list[int], fixed: list[int]) -> list[int]:
+    """Local BA's fixed keyframes, at most ``mapping.window_max_fixed`` of them (0: all, ORB-SLAM's):
+    the ones observing the most of the local keyframes' landmarks (newest first among equals), and the
+    segment's first keyframe where it is among them (it holds the gauge). On a still camera every
+    keyframe observes every local landmark, so the fixed set and BA's edges would grow with each
+    keyframe (docs/notes/s15-stillcost.md); the best-covisible bound is ORB-SLAM's for its searches
+    (GetBestCovisibilityKeyFrames)."""
+    n = mapper.params.window_max_fixed
+    if n <= 0 or len(fixed) <= n:
+        return fixed
+    first = mapper._segment_first[rec.segment]
+    seen = np.concatenate([mapper.keyframes[k].landmark for k in local])
+    seen = seen[seen >= 0]
+    counts = {}
+    for k in fixed:
+        lm = mapper.keyframes[k].landmark
+        counts[k] = int(np.count_nonzero(np.isin(lm[lm >= 0], seen, assume_unique=False)))
+    keep = set(sorted(fixed, key=lambda k: (-counts[k], -k))[:n])
+    if first in fixed:
+        keep.add(first)
+    return sorted(keep)
+
+
+def descriptor_observations(obs: dict[int, int], n: int) -> dict[int, int]:
+    """The newest ``n`` of a landmark's observations (keyframe -> keypoint row, insertion order) for
+    its distinctive descriptor (0: all, ORB-SLAM's ComputeDistinctiveDescriptors). The median-distance
+    minimiser costs O(n^2) per landmark, and on a still camera n grows with every keyframe."""
+    if n <= 0 or len(obs) <= n:
+        return obs
+    items = list(obs.items())[-n:]
+    return dict(items)
+
+
+def depth_constrained(mapper, lm_ids: list[int], e_kf: np.ndarray, e_lm: np.ndarray, e_kp: np.ndarray):
+    """Local BA's landmarks and edges restricted to landmarks with a stereo observation among the edges.
+
+    When BA sees only part of a landmark's observations (``window_max_fixed``, keyframe culling), a
+    landmark made from stereo in a keyframe left out may keep only left-image (mono) observations from
+    nearly one viewpoint: on a still camera nothing fixes its depth, and LM walks it out along the ray
+    (EuRoC g1-b0.06-low with 8 fixed keyframes: landmarks at 0.2-5 km by frame 39). Tracking keeps such
+    a point as an inlier at any translation, and EPnP's final fit over RANSAC's inliers, whose control
+    points it dominates, returns poses 0.3-3 m off (docs/notes/s15-stillcost.md). Those landmarks stay
+    where they are. Returns (lm_ids, e_kf, e_lm, e_kp) as ``MapStoreAccess._observation_edges``."""
+    if not len(e_kf):
+        return lm_ids, e_kf, e_lm, e_kp
+    kf_ids = np.unique(e_kf)
+    table = np.concatenate([mapper.keyframes[k].u_right for k in kf_ids.tolist()])
+    start = np.zeros(int(kf_ids[-1]) + 1, np.int64)
+    start[kf_ids] = np.cumsum([0] + [len(mapper.keyframes[k].u_right) for k in kf_ids[:-1].tolist()])
+    stereo = table[start[e_kf] + e_kp] >= 0
+    lm_arr = np.asarray(lm_ids, np.int64)
+    has = np.zeros(len(lm_arr), bool)
+    has[np.searchsorted(lm_arr, e_lm[stereo])] = True
+    keep_lm = lm_arr[has]
+    keep = has[np.searchsorted(lm_arr, e_lm)]
+    return keep_lm.tolist(), e_kf[keep], e_lm[keep], e_kp[keep]

@@ -31,18 +31,22 @@ How it is done here (vectorised; no per-keypoint Python except setting the angle
 * Orientation: intensity centroid (Rosin 1999) in the circular patch of radius 15 (ORB's
   ``umax``), from gathered patches; descriptors: ``cv2.ORB.compute`` on each level with these
   angles (OpenCV keeps the given ``KeyPoint.angle``, tests/test_cell_extractor.py checks it).
+  Both run once for all levels' selected corners (``canopy.frontend.cell_levels``: one patch
+  gather and product per level into one array, one arctan2; ``cv2.KeyPoint`` objects from a
+  pool): the same outputs as level by level (tests/test_cell_levels.py), ~11 % less CPU per
+  KITTI image with the changes of docs/notes/s15-extract.md.
 
 Coordinates follow cv2.ORB's convention (x_level * scale^level), so ``keypoint_centres`` and
 stereo matching treat both extractors alike.
 """
 from __future__ import annotations
 
-from itertools import repeat
 from operator import attrgetter
 
 import cv2
 import numpy as np
 
+from canopy.frontend.cell_levels import HALF_PATCH, MASK_UV, KeyPointPool, ic_angles_levels
 from canopy.frontend.enhanced_extractor import EnhancedCellsRule
 from canopy.frontend.features import Features, OrbExtractor
 from canopy.frontend.params import TrackingParams
@@ -50,16 +54,24 @@ from canopy.frontend.track_health import image_noise_sigma
 
 HARRIS_K = 0.04
 HARRIS_BLOCK = 7
-HALF_PATCH = 15            # ORB's orientation patch radius (HALF_PATCH_SIZE)
 FAST_BORDER = 3            # FAST needs 3 px around a pixel
 _RESPONSE = attrgetter("response")
 
 
-def _fast_points(detector, view: np.ndarray, ox: int, oy: int) -> tuple[np.ndarray, np.ndarray]:
-    """FAST corners of an image view as ((K,2) int64 pixel coordinates offset by (ox, oy), (K,) scores)."""
+def _scores(kps) -> np.ndarray:
+    """FAST scores (``KeyPoint.response``, integers 0..255) of keypoints as int16: read as Python
+    floats into float64 (no conversion per item), then cast: 15 % less than reading into int16."""
+    return np.fromiter(map(_RESPONSE, kps), np.float64, len(kps)).astype(np.int16)
+
+
+def _fast_points(detector, view: np.ndarray, ox: int, oy: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """FAST corners of an image view: (x, y) contiguous int64 pixel coordinates offset by (ox, oy)
+    and (K,) int16 scores (FAST's score is an integer 0..255: as int16 the quadtree's stable sort
+    is a radix sort and needs no test of the floats first)."""
     kps = detector.detect(view)
-    pts = np.asarray(cv2.KeyPoint_convert(kps), np.float32).reshape(-1, 2).astype(np.int64) + (ox, oy)
-    return pts, np.fromiter(map(_RESPONSE, kps), np.float32, len(kps))
+    xy = np.asarray(cv2.KeyPoint_convert(kps), np.float32).reshape(-1, 2).T.astype(np.int64, order="C")
+    xy += np.array([[ox], [oy]], np.int64)
+    return xy[0], xy[1], _scores(kps)
 
 
 def level_quotas(n_features: int, scale_factor: float, n_levels: int) -> np.ndarray:
@@ -72,33 +84,7 @@ def level_quotas(n_features: int, scale_factor: float, n_levels: int) -> np.ndar
     return q
 
 
-def _circle_offsets() -> tuple[np.ndarray, np.ndarray]:
-    """(u, v) offsets of ORB's circular orientation patch (its ``umax`` table, radius 15)."""
-    vmax = int(np.floor(HALF_PATCH * np.sqrt(2.0) / 2 + 1))
-    vmin = int(np.ceil(HALF_PATCH * np.sqrt(2.0) / 2))
-    umax = np.zeros(HALF_PATCH + 1, np.int64)
-    for v in range(vmax + 1):
-        umax[v] = int(np.round(np.sqrt(HALF_PATCH ** 2 - v * v)))
-    v0 = 0
-    for v in range(HALF_PATCH, vmin - 1, -1):  # symmetric about the diagonal, as OpenCV / ORB-SLAM
-        while umax[v0] == umax[v0 + 1]:
-            v0 += 1
-        umax[v] = v0
-        v0 += 1
-    us, vs = [], []
-    for v in range(-HALF_PATCH, HALF_PATCH + 1):
-        u = np.arange(-umax[abs(v)], umax[abs(v)] + 1)
-        us.append(u)
-        vs.append(np.full(len(u), v))
-    return np.concatenate(us), np.concatenate(vs)
-
-
-_CU, _CV = _circle_offsets()
-_MASK_U = np.zeros((2 * HALF_PATCH + 1,) * 2, np.float32)  # u (resp. v) inside the circle, 0 outside
-_MASK_V = np.zeros_like(_MASK_U)
-_MASK_U[_CV + HALF_PATCH, _CU + HALF_PATCH] = _CU
-_MASK_V[_CV + HALF_PATCH, _CU + HALF_PATCH] = _CV
-_MASK_UV = np.stack([_MASK_U, _MASK_V])
+_MASK_UV = MASK_UV                               # u (resp. v) inside ORB's circle, 0 outside
 _HB = HARRIS_BLOCK // 2 + 1                      # patch half size incl. the Sobel border
 
 
@@ -144,7 +130,8 @@ def ic_angles(img: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
 def quadtree_select(x: np.ndarray, y: np.ndarray, score: np.ndarray, x0: float, y0: float,
                     width: float, height: float, quota: int) -> np.ndarray:
     """Indices of at most ``quota`` points spread as ORB-SLAM's ``DistributeOctTree`` spreads
-    them (best ``score`` per node), vectorised over depths of a regular quadtree."""
+    them (best ``score`` per node), vectorised over depths of a regular quadtree. ``x``, ``y``:
+    int or float arrays ((x - x0) / rw is the same float64 either way for pixel coordinates)."""
     n = len(x)
     if n <= quota:
         return np.arange(n)
@@ -163,32 +150,47 @@ def quadtree_select(x: np.ndarray, y: np.ndarray, score: np.ndarray, x0: float, 
     # depths below log4(quota / n_root) have fewer nodes than the quota: start there
     depth = max(0, int(np.floor(np.log(quota / n_root) / np.log(4.0))))
     prev_key = None if depth == 0 else _node_keys(rx, ry, n_root, depth - 1, floor)
+    n_prev = 0 if prev_key is None else int(prev_key.max()) + 1
     while True:
         key = _node_keys(rx, ry, n_root, depth, floor)
-        occupied = np.zeros(int(key.max()) + 1, bool)
+        n_keys = int(key.max()) + 1
+        occupied = np.zeros(n_keys, bool)
         occupied[key] = True
-        if int(occupied.sum()) >= quota or rw / 2 ** depth < 1.0:
+        if int(np.count_nonzero(occupied)) >= quota or rw / 2 ** depth < 1.0:
             break
-        prev_key = key
+        prev_key, n_prev = key, n_keys
         depth += 1
-    winners = _best_per_key(key, rank, by_rank)
-    if len(winners) <= quota:
-        return winners
+    # in rank space (index r = the point of rank r, by_rank[r]): the best of a node is its smallest
+    # rank, and a list of ranks marked in a bool array comes out sorted by rank without a sort
+    win = _best_ranks(key, rank, n_keys)
+    if np.count_nonzero(win) <= quota:
+        return np.sort(by_rank[win])
     # every parent node keeps its best (they are fewer than the quota), the rest by score: ORB-SLAM
     # splits the most populated nodes last in its final round, which ends at the quota
-    parent_best = _best_per_key(prev_key, rank, by_rank) if prev_key is not None else np.zeros(0, np.int64)
-    is_parent_best = np.zeros(n, bool)   # a parent's best is its child's best too: a subset of winners
-    is_parent_best[parent_best] = True
-    rest = winners[~is_parent_best[winners]]
-    rest = rest[np.argsort(rank[rest], kind="stable")[: quota - len(parent_best)]]
-    return np.sort(np.concatenate([parent_best, rest]))
+    if prev_key is None:
+        parent = np.zeros(n, bool)
+    else:
+        parent = _best_ranks(prev_key, rank, n_prev)   # a parent's best is its child's best too
+    rest = np.flatnonzero(win & ~parent)[: quota - int(np.count_nonzero(parent))]
+    return np.sort(by_rank[np.concatenate([np.flatnonzero(parent), rest])])
+
+
+def _best_ranks(key: np.ndarray, rank: np.ndarray, n_keys: int) -> np.ndarray:
+    """(n,) bool indexed by rank: True at the best (smallest) rank of every key."""
+    best = np.full(n_keys, len(rank), np.int64)
+    np.minimum.at(best, key, rank)
+    out = np.zeros(len(rank), bool)
+    out[best[best < len(rank)]] = True
+    return out
 
 
 def _descending_key(score: np.ndarray) -> np.ndarray:
     """A key whose stable ascending sort is that of ``-score``. FAST scores are small integers
-    (0..255, stored as float32): as int16, numpy's stable sort is a radix sort, ~10x faster than
+    (0..255, as float32 or int16): as int16, numpy's stable sort is a radix sort, ~10x faster than
     the merge sort of floats (~0.4 ms per 5 k corners); same order, ties in input order."""
     neg = -np.asarray(score)
+    if neg.dtype == np.int16:   # the extractor's FAST scores (0..255): no test needed
+        return neg
     if len(neg) and neg.dtype.kind == "f" and -32768 <= neg.min() and neg.max() <= 32767:
         as_int = neg.astype(np.int16)
         if np.array_equal(as_int, neg):
@@ -202,18 +204,6 @@ def _node_keys(rx: np.ndarray, ry: np.ndarray, n_root: int, depth: int, floor: b
     if floor:
         return np.floor(ry * k).astype(np.int64) * (n_root * k + 1) + np.floor(rx * k).astype(np.int64)
     return (ry * k).astype(np.int64) * (n_root * k + 1) + (rx * k).astype(np.int64)
-
-
-def _best_per_key(key: np.ndarray, rank: np.ndarray, by_rank: np.ndarray | None = None) -> np.ndarray:
-    """Index of the best-ranked point of every key (``rank``: a permutation, 0 = best), sorted.
-    The smallest rank per key by ``np.minimum.at`` over a table of the keys: no sort of all points.
-    ``by_rank``: the inverse permutation (the point of each rank) if the caller has it."""
-    best = np.full(int(key.max()) + 1, len(rank), np.int64)
-    np.minimum.at(best, key, rank)
-    if by_rank is None:
-        by_rank = np.empty_like(rank)
-        by_rank[rank] = np.arange(len(rank))
-    return np.sort(by_rank[best[best < len(rank)]])
 
 
 class CellExtractor:
@@ -244,6 +234,8 @@ class CellExtractor:
                                    scoreType=cv2.ORB_HARRIS_SCORE, patchSize=params.patch_size)
         self._opencv = OrbExtractor(params) if params.extractor_enhanced == "opencv" else None
         self._enhanced_rule = EnhancedCellsRule(params) if self._opencv is not None else None
+        self._keypoints = KeyPointPool(params.patch_size)  # the cv2.KeyPoints ORB.compute is given
+        self._cells: dict = {}                              # cell look-up tables per level size
         self.last_stats: dict = {}
 
     def pyramid(self, image: np.ndarray) -> list[np.ndarray]:
@@ -269,8 +261,9 @@ class CellExtractor:
         return min(low, 254), sigma
 
     def _fallback_corners(self, img: np.ndarray, empty: np.ndarray, low: int, x0: int, y0: int,
-                          x1: int, y1: int, cw: int, ch: int) -> tuple[np.ndarray, np.ndarray]:
-        """FAST corners at ``low`` in the ``empty`` cells (nrow x ncol bool) of the detection region.
+                          x1: int, y1: int, cw: int, ch: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """FAST corners at ``low`` in the ``empty`` cells (nrow x ncol bool) of the detection region:
+        (x, y, int16 scores).
 
         The corners are those of one FAST call per cell row on a view from the row's first to its
         last empty cell with FAST's 3 px border (ORB-SLAM calls FAST per cell, cells overlapping by
@@ -304,47 +297,56 @@ class CellExtractor:
             kps += k
             counts.append(len(k))
         if not kps:
-            return np.zeros((0, 2), np.int64), np.zeros(0, np.float32)
+            e = np.zeros(0, np.int64)
+            return e, e, np.zeros(0, np.int16)
         run = np.repeat(np.arange(len(counts)), counts)   # the run of every corner
-        pts = np.asarray(cv2.KeyPoint_convert(kps), np.float32).reshape(-1, 2).astype(np.int64)
-        px = pts[:, 0] + va[run]
-        py = pts[:, 1] + (ya - FAST_BORDER)[run]
-        score = np.fromiter(map(_RESPONSE, kps), np.float32, len(kps))
+        xy = np.asarray(cv2.KeyPoint_convert(kps), np.float32).reshape(-1, 2).T.astype(np.int64, order="C")
+        px = xy[0] + va[run]
+        py = xy[1] + (ya - FAST_BORDER)[run]
+        score = _scores(kps)
         ok = np.flatnonzero((px >= xa[run]) & (px < xb[run]))
         px, py, score = px[ok], py[ok], score[ok]
         # row-major, as one FAST call per cell row returns them (the quadtree's ties keep input order)
         order = np.argsort(py * img.shape[1] + px, kind="stable")
-        return np.column_stack([px[order], py[order]]), score[order]
+        return px[order], py[order], score[order]
 
     def detect_level(self, img: np.ndarray, high: int, low: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple]:
-        """FAST corners of one level: (x, y int arrays, FAST scores) with ``high`` in every cell and
+        """FAST corners of one level: (x, y int64 arrays, int16 FAST scores) with ``high`` in every cell and
         ``low`` in the cells where ``high`` found none; plus the detection region (x0, y0, w, h)."""
         h, w = img.shape
         b = self.border
         x0, y0, x1, y1 = b, b, w - b, h - b
         if x1 - x0 < 4 or y1 - y0 < 4:
             e = np.zeros(0, np.int64)
-            return e, e, np.zeros(0, np.float32), (x0, y0, 0, 0)
+            return e, e, np.zeros(0, np.int16), (x0, y0, 0, 0)
         cs = self.params.cell_size
         ncol, nrow = max(1, (x1 - x0) // cs), max(1, (y1 - y0) // cs)
         cw, ch = int(np.ceil((x1 - x0) / ncol)), int(np.ceil((y1 - y0) / nrow))
         self._fast.setThreshold(int(high))
-        pts, score = _fast_points(self._fast, img[y0 - FAST_BORDER:y1 + FAST_BORDER, x0 - FAST_BORDER:x1 + FAST_BORDER],
-                                  x0 - FAST_BORDER, y0 - FAST_BORDER)
-        keep = (pts[:, 0] >= x0) & (pts[:, 0] < x1) & (pts[:, 1] >= y0) & (pts[:, 1] < y1)
-        if not keep.all():  # OpenCV's FAST leaves the view's 3 px border out: all are inside, as a rule
-            pts, score = pts[keep], score[keep]
-        pts_all, scores = [pts], [score]
+        x, y, score = _fast_points(self._fast, img[y0 - FAST_BORDER:y1 + FAST_BORDER, x0 - FAST_BORDER:x1 + FAST_BORDER],
+                                   x0 - FAST_BORDER, y0 - FAST_BORDER)
+        # OpenCV's FAST leaves the view's 3 px border out: all are inside, as a rule
+        if len(x) and not (x.min() >= x0 and x.max() < x1 and y.min() >= y0 and y.max() < y1):
+            keep = (x >= x0) & (x < x1) & (y >= y0) & (y < y1)
+            x, y, score = x[keep], y[keep], score[keep]
         if low < high:
-            p = pts_all[0]
-            cell = np.minimum((p[:, 1] - y0) // ch, nrow - 1) * ncol + np.minimum((p[:, 0] - x0) // cw, ncol - 1)
-            empty = (np.bincount(cell, minlength=nrow * ncol) == 0).reshape(nrow, ncol)
+            row_cell, col_cell = self._cell_tables(h, w, x0, y0, cw, ch, nrow, ncol)
+            empty = (np.bincount(row_cell[y] + col_cell[x], minlength=nrow * ncol) == 0).reshape(nrow, ncol)
             if empty.any():
-                q, sq = self._fallback_corners(img, empty, int(low), x0, y0, x1, y1, cw, ch)
-                pts_all.append(q)
-                scores.append(sq)
-        pts = np.concatenate(pts_all)
-        return pts[:, 0], pts[:, 1], np.concatenate(scores), (x0, y0, x1 - x0, y1 - y0)
+                qx, qy, qs = self._fallback_corners(img, empty, int(low), x0, y0, x1, y1, cw, ch)
+                x, y, score = np.concatenate([x, qx]), np.concatenate([y, qy]), np.concatenate([score, qs])
+        return x, y, score, (x0, y0, x1 - x0, y1 - y0)
+
+    def _cell_tables(self, h: int, w: int, x0: int, y0: int, cw: int, ch: int, nrow: int, ncol: int):
+        """(row's cell index x ncol per pixel row, cell column per pixel column) of a level's cell grid,
+        made once per level size: a corner's cell is two table look-ups and an add."""
+        key = (h, w)
+        tables = self._cells.get(key)
+        if tables is None:
+            rows = np.minimum(np.maximum(np.arange(h) - y0, 0) // ch, nrow - 1) * ncol
+            cols = np.minimum(np.maximum(np.arange(w) - x0, 0) // cw, ncol - 1)
+            tables = self._cells[key] = (rows, cols)
+        return tables
 
     def extract(self, image: np.ndarray, fast_threshold: int | None = None,
                 fallback_threshold: int | None = None, min_keypoints: int = 0,
@@ -363,9 +365,11 @@ class CellExtractor:
         high = int(self.params.fast_threshold if fast_threshold is None else fast_threshold)
         low, sigma = self.fallback_for(img, fallback_threshold, noise_sigma)
         img = np.ascontiguousarray(img)
-        uv, octave, response, desc = [], [], [], []
+        levels = self.pyramid(img)
+        # per level: FAST corners, spread to the level's quota (what is selected depends on the level alone)
+        xs, ys, hs, lv = [], [], [], []
         n_candidates = 0
-        for lvl, level in enumerate(self.pyramid(img)):
+        for lvl, level in enumerate(levels):
             quota = int(self.quotas[lvl])
             if quota <= 0:
                 continue
@@ -377,42 +381,66 @@ class CellExtractor:
             # strongest Harris responses of those (cv2.ORB's ranking of its 2x FAST retention) fill
             # the quota. A second quadtree on Harris instead keeps weaker corners in empty areas:
             # 20 % fewer stereo matches on KITTI 06 (docs/notes/s6-cells.md)
-            xf, yf = x.astype(np.float64), y.astype(np.float64)
             rank = self.params.cell_ranking
             if rank == "harris2x":
-                sel = quadtree_select(xf, yf, fast_score, rx, ry, rw, rh, 2 * quota)
+                sel = quadtree_select(x, y, fast_score, rx, ry, rw, rh, 2 * quota)
                 harris = harris_responses(level, x[sel], y[sel])
                 keep = np.sort(np.argsort(-harris, kind="stable")[:quota])
                 sel, harris = sel[keep], harris[keep]
             elif rank == "fast":  # ORB-SLAM as is: the best FAST score per node
-                sel = quadtree_select(xf, yf, fast_score, rx, ry, rw, rh, quota)
-                harris = harris_responses(level, x[sel], y[sel]) if self.responses else np.zeros(len(sel), np.float32)
+                sel = quadtree_select(x, y, fast_score, rx, ry, rw, rh, quota)
+                harris = harris_responses(level, x[sel], y[sel]) if self.responses else None
             else:  # "harris": the best Harris response per node
                 harris = harris_responses(level, x, y)
-                sel = quadtree_select(xf, yf, harris, rx, ry, rw, rh, quota)
+                sel = quadtree_select(x, y, harris, rx, ry, rw, rh, quota)
                 harris = harris[sel]
-            x, y = x[sel], y[sel]
-            angles = ic_angles(level, x, y)
-            size = float(self.params.patch_size)
-            # map over the constructor, not a list comprehension: no Python frame per keypoint
-            kps = list(map(cv2.KeyPoint, x.tolist(), y.tolist(), repeat(size, len(x)), angles.tolist()))
-            kps, d = self._orb.compute(level, kps)
+            xs.append(x[sel])
+            ys.append(y[sel])
+            hs.append(harris)
+            lv.append(lvl)
+        # then every level's keypoints at once: orientation, cv2.KeyPoints, descriptors per level
+        # (ORB.compute on the level they were found on, with these angles)
+        feats = self._describe(levels, xs, ys, hs, lv)
+        self.last_stats = {"candidates": n_candidates, "fast_high": high, "fast_low": low, "noise_sigma": sigma}
+        return feats
+
+    def _describe(self, levels: list[np.ndarray], xs: list, ys: list, hs: list, lv: list) -> Features:
+        """Features of the selected corners (``xs[i]``, ``ys[i]`` on pyramid level ``lv[i]``; ``hs[i]``
+        their Harris responses or None for zeros): intensity-centroid angles of all levels in one
+        pass (``cell_levels.ic_angles_levels``), the cv2.KeyPoints from the extractor's pool,
+        ``ORB.compute`` per level."""
+        if not xs:
+            return Features.empty()
+        counts = [len(x) for x in xs]
+        starts = np.concatenate([[0], np.cumsum(counts)])
+        x_all, y_all = np.concatenate(xs), np.concatenate(ys)
+        angles = ic_angles_levels([levels[lvl] for lvl in lv], x_all, y_all, starts)
+        kps_all = self._keypoints.keypoints(x_all, y_all, angles)
+        keep, desc = [], []
+        for i, lvl in enumerate(lv):
+            a, b = int(starts[i]), int(starts[i + 1])
+            kps, d = self._orb.compute(levels[lvl], kps_all[a:b])
             if d is None or len(kps) == 0:
                 continue
-            if len(kps) != len(x):  # OpenCV dropped some (border; it keeps the others' order): by position
+            if len(kps) != b - a:  # OpenCV dropped some (border; it keeps the others' order): by position
+                x, y, w = xs[i], ys[i], levels[lvl].shape[1]
                 kept = np.asarray(cv2.KeyPoint_convert(kps), np.float32).reshape(-1, 2).astype(np.int64)
-                idx = np.flatnonzero(np.isin(y * level.shape[1] + x, kept[:, 1] * level.shape[1] + kept[:, 0]))
-                x, y, harris = x[idx], y[idx], harris[idx]
-            s = float(self.scale_factors[lvl])
-            uv.append(np.column_stack([x, y]).astype(np.float32) * s)
-            octave.append(np.full(len(x), lvl, np.int32))
-            response.append(harris)
+                keep.append(a + np.flatnonzero(np.isin(y * w + x, kept[:, 1] * w + kept[:, 0])))
+            else:
+                keep.append(np.arange(a, b))
             desc.append(d)
-        self.last_stats = {"candidates": n_candidates, "fast_high": high, "fast_low": low, "noise_sigma": sigma}
-        if not uv:
+        if not desc:
             return Features.empty()
-        return Features(np.concatenate(uv), np.concatenate(octave), np.concatenate(response),
-                        np.concatenate(desc), extractor="cells")
+        idx = np.concatenate(keep)
+        octave = np.repeat(np.asarray(lv, np.int32), counts)[idx]
+        # float32 (x, y) times the level's scale as float32: what the per-level float32 * scale gave
+        scale = self.scale_factors.astype(np.float32)[octave]
+        uv = np.column_stack([x_all[idx], y_all[idx]]).astype(np.float32) * scale[:, None]
+        if all(h is None for h in hs):
+            response = np.zeros(len(idx), np.float32)
+        else:
+            response = np.concatenate([np.zeros(n, np.float32) if h is None else h for h, n in zip(hs, counts)])[idx]
+        return Features(uv, octave, response, np.concatenate(desc), extractor="cells")
 
 
 def make_extractor(params: TrackingParams, responses: bool = True):

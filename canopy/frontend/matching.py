@@ -202,12 +202,23 @@ def grid_pairs(q_uv: np.ndarray, r_uv: np.ndarray, cell: float) -> tuple[np.ndar
     return np.concatenate(qis), np.concatenate(rjs)
 
 
+def _column_range(uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``uv.min(axis=0)``, ``uv.max(axis=0)`` of (N,2) coordinates, column by column: the same
+    values and dtype (a minimum is exact in any order; NaN propagates either way), ~4x cheaper
+    (a reduction over axis 0 of an (N,2) array runs numpy's inner loop over 2 elements N times;
+    4 of them were ~0.25 ms of each local-map search on KITTI, issue 8)."""
+    c0, c1 = uv[:, 0], uv[:, 1]
+    return np.array([c0.min(), c1.min()], uv.dtype), np.array([c0.max(), c1.max()], uv.dtype)
+
+
 def _grouped_grid(q_uv: np.ndarray, r_uv: np.ndarray, r_group: np.ndarray, cells: np.ndarray):
     """The cell keys of ``grid_pairs_grouped``: (cells, grid origin, columns per group, cells per
     group, each group's key offset, the references' keys)."""
     cells = np.maximum(np.asarray(cells, float), 1.0)
-    lo_uv = np.minimum(q_uv.min(axis=0), r_uv.min(axis=0))
-    span = np.maximum(q_uv.max(axis=0), r_uv.max(axis=0)) - lo_uv
+    q_lo, q_hi = _column_range(q_uv)
+    r_lo, r_hi = _column_range(r_uv)
+    lo_uv = np.minimum(q_lo, r_lo)
+    span = np.maximum(q_hi, r_hi) - lo_uv
     n_cols = (span[0] // cells).astype(np.int64) + 3
     n_rows = (span[1] // cells).astype(np.int64) + 3
     sizes = n_cols * n_rows
@@ -254,8 +265,8 @@ def grid_pairs_grouped(q_uv: np.ndarray, r_uv: np.ndarray, r_group: np.ndarray,
     total = int(counts.sum())
     if total == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    # the query of every pair: counts are laid out query by query, 3 x n_groups ranges each
-    query = np.repeat(np.repeat(np.arange(len(q_uv)), 3 * n_groups), counts)
+    # the query of every pair: its 3 x n_groups ranges are consecutive, so one repeat by its total
+    query = np.repeat(np.arange(len(q_uv)), counts.reshape(len(q_uv), -1).sum(axis=1))
     rpos = np.repeat(lo.reshape(-1) - np.cumsum(counts) + counts, counts) + np.arange(total)
     return query, order[rpos]
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
+from numpy.lib.stride_tricks import as_strided
 
 from canopy.frontend.features import Features
 from canopy.frontend.matching import as_words, best_two, hamming_pairs, unique_by_reference
@@ -109,44 +109,35 @@ def subpixel_refine(left_img: np.ndarray, right_img: np.ndarray, uvl: np.ndarray
     sum_type = np.uint16 if (2 * w + 1) ** 2 * 510 < 1 << 16 else np.int32
     # patches of every level gathered first, then one SAD pass over all of them: each row's
     # arithmetic is the same, and one pass instead of one per level saves ~8x the numpy calls
-    parts = []
-    for lvl in levels:
-        sel = np.flatnonzero(octave == lvl)
-        s = scale_factors[lvl]
-        il, ir = pyr_l[int(lvl)], pyr_r[int(lvl)]
-        hh, ww = il.shape
-        xl = np.round(uvl[sel, 0] / s).astype(np.int64)
-        yl = np.round(uvl[sel, 1] / s).astype(np.int64)
-        xr0 = np.round(ur[sel] / s).astype(np.int64)
-        inside = ((yl - w >= 0) & (yl + w < hh) & (xl - w >= 0) & (xl + w < ww)
-                  & (xr0 - L - w >= 0) & (xr0 + L + w < ww))
-        sel, xl, yl, xr0 = sel[inside], xl[inside], yl[inside], xr0[inside]
-        if len(sel) == 0:
-            continue
+    # the keypoints by level (a stable sort: within a level in index order, as one flatnonzero per
+    # level gives them), their level coordinates and the window test in one pass each (the same
+    # per-element divisions by the level's scale); per level only the two window gathers
+    order = np.argsort(octave, kind="stable")
+    oc = octave[order]
+    s_all = scale_factors[oc]
+    xl = np.round(uvl[order, 0] / s_all).astype(np.int64)
+    yl = np.round(uvl[order, 1] / s_all).astype(np.int64)
+    xr0 = np.round(ur[order] / s_all).astype(np.int64)
+    at = np.searchsorted(levels, oc)
+    hh, ww = (np.array([pyr_l[int(lvl)].shape[i] for lvl in levels], np.int64)[at] for i in (0, 1))
+    inside = np.flatnonzero((yl - w >= 0) & (yl + w < hh) & (xl - w >= 0) & (xl + w < ww)
+                            & (xr0 - L - w >= 0) & (xr0 + L + w < ww))
+    if len(inside) == 0:
+        return u_out, sad_out, ok_out
+    sel, oc, s, xl, yl, xr0 = order[inside], oc[inside], s_all[inside], xl[inside], yl[inside], xr0[inside]
+    kept = np.unique(oc)
+    bounds = np.searchsorted(oc, kept).tolist() + [len(oc)]
+    patches, bands = [], []
+    for lvl, a, b in zip(kept.tolist(), bounds[:-1], bounds[1:]):
         # whole patch rows copied from sliding-window views (the same pixels as a gather of every
         # pixel by (row, column) index arrays, ~3x faster); uint8 until all levels are joined
-        patch_l = sliding_window_view(il, (2 * w + 1, 2 * w + 1))[yl - w, xl - w]             # (K,P,P)
-        band = sliding_window_view(ir, (2 * w + 1, 2 * (L + w) + 1))[yl - w, xr0 - L - w]   # (K,P,2L+2w+1)
-        parts.append((sel, xr0, np.full(len(sel), s), patch_l, band))
-    if not parts:
-        return u_out, sad_out, ok_out
-    sel, xr0, s = (np.concatenate([part[i] for part in parts]) for i in range(3))
-    patch_l = np.concatenate([part[3] for part in parts]).astype(np.int16)
-    band = np.concatenate([part[4] for part in parts]).astype(np.int16)
+        patches.append(_windows(pyr_l[lvl], 2 * w + 1, 2 * w + 1)[yl[a:b] - w, xl[a:b] - w])           # (K,P,P)
+        bands.append(_windows(pyr_r[lvl], 2 * w + 1, 2 * (L + w) + 1)[yl[a:b] - w, xr0[a:b] - L - w])  # (K,P,2L+2w+1)
     if normalise == "mean":
-        sad = _zero_mean_sad(patch_l, band, 2 * L + 1)
+        sad = _zero_mean_sad(np.concatenate(patches).astype(np.int16), np.concatenate(bands).astype(np.int16),
+                             2 * L + 1)
     else:
-        patch_l -= patch_l[:, w:w + 1, w:w + 1]
-        sad = np.empty((len(sel), 2 * L + 1), np.float64)
-        # int16 differences of uint8 pixels, one window shift at a time: the (K,P,P) temporaries
-        # stay small (20x faster than one (K,P,2L+1,P) float array; identical sums)
-        diff = np.empty(patch_l.shape, np.int16)  # one buffer for every shift (no temporaries)
-        for shift in range(2 * L + 1):
-            # window at this shift minus its centre pixel, minus the centred left patch
-            np.subtract(band[:, :, shift:shift + 2 * w + 1], patch_l, out=diff)
-            diff -= band[:, w:w + 1, shift + w:shift + w + 1]
-            np.abs(diff, out=diff)
-            sad[:, shift] = diff.reshape(len(sel), -1).view(sum_type).sum(axis=1, dtype=sum_type)
+        sad = _centre_sad(np.concatenate(patches), np.concatenate(bands), 2 * L + 1, sum_type)
     best = np.argmin(sad, axis=1)
     interior = (best > 0) & (best < 2 * L)
     idx = np.arange(len(sel))
@@ -161,6 +152,47 @@ def subpixel_refine(left_img: np.ndarray, right_img: np.ndarray, uvl: np.ndarray
     sad_out[sel] = sad[idx, best]
     ok_out[sel] = good
     return u_out, sad_out, ok_out
+
+
+def _windows(image: np.ndarray, rows: int, cols: int) -> np.ndarray:
+    """Read-only view of every (rows, cols) window of a 2-D image, indexed by its top-left pixel:
+    ``sliding_window_view(image, (rows, cols))``'s array (the same shape, strides and pixels),
+    built by one ``as_strided`` call, without sliding_window_view's argument checks (~25 us a
+    call, 16 calls per KITTI frame; issue 8)."""
+    h, w = image.shape
+    s0, s1 = image.strides
+    return as_strided(image, (h - rows + 1, w - cols + 1, rows, cols), (s0, s1, s0, s1), writeable=False)
+
+
+def _centre_sad(patch_l: np.ndarray, band: np.ndarray, n_shifts: int, sum_type) -> np.ndarray:
+    """SAD of each uint8 left patch (K,P,P) against the P-wide windows of its right band
+    (K,P,P+n_shifts-1) at every shift, each minus its centre pixel (ORB-SLAM2's
+    ComputeStereoMatches): Σ|(R − R_c) − (L − L_c)|, as a (K, n_shifts) float64 view.
+
+    int16 differences of uint8 pixels, one window shift at a time, with the keypoints on the
+    innermost axis: the patches are laid out (P,P,K) once, so every operation below runs over
+    contiguous rows of K values (in the (K,P,P) layout a shifted window is a strided view whose
+    inner runs are 11 pixels long, ~3x slower per subtraction; issue 8, docs/notes/s15-trackcpu.md).
+    The sums are exact integers (|differences| <= 510, P² of them fit ``sum_type``), so the
+    values do not depend on the order of the additions: the same SADs as the (K,P,P) loop."""
+    P = patch_l.shape[1]
+    w = P // 2
+    k = len(patch_l)
+    pl = patch_l.transpose(1, 2, 0).astype(np.int16, order="C")     # (P,P,K)
+    bd = band.transpose(1, 2, 0).astype(np.int16, order="C")         # (P,P+n_shifts-1,K)
+    pl -= pl[w, w]                                                   # the centred left patch
+    sad = np.empty((n_shifts, k), np.float64)
+    diff = np.empty((P, P, k), np.int16)  # one buffer for every shift (no temporaries)
+    # |differences| are >= 0: read as uint16 for the 16-bit sums (the same values, no cast)
+    flat = diff.reshape(P * P, k)
+    flat = flat.view(np.uint16) if sum_type == np.uint16 else flat
+    for shift in range(n_shifts):
+        # window at this shift minus the centred left patch, minus the window's centre pixel
+        np.subtract(bd[:, shift:shift + P], pl, out=diff)
+        diff -= bd[w, shift + w]
+        np.abs(diff, out=diff)
+        sad[shift] = flat.sum(axis=0, dtype=sum_type)
+    return sad.T
 
 
 def _zero_mean_sad(patch_l: np.ndarray, band: np.ndarray, n_shifts: int) -> np.ndarray:
@@ -198,7 +230,9 @@ def stereo_candidates(left: Features, right: Features, tol: np.ndarray, octave_t
     by_level = order[np.argsort(right.octave[order], kind="stable")]   # by level, then row
     levels, first = np.unique(right.octave[by_level], return_index=True)
     ends = np.r_[first[1:], len(by_level)]
-    v_sorted = right.uv[by_level, 1]
+    # float64 once: searchsorted compares in the common type (float64 with the float64 bounds) and
+    # would cast the float32 rows again on every call
+    v_sorted = right.uv[by_level, 1].astype(np.float64)
     lo_v, hi_v = left.uv[:, 1] - tol, left.uv[:, 1] + tol
     # per left keypoint, one range of by_level per right level (empty where the levels are too far)
     lo = np.zeros((len(left), len(levels)), np.int64)
@@ -207,13 +241,17 @@ def stereo_candidates(left: Features, right: Features, tol: np.ndarray, octave_t
         near = np.flatnonzero(np.abs(left.octave - lvl) <= octave_tolerance)
         lo[near, g] = a + np.searchsorted(v_sorted[a:b], lo_v[near], side="left")
         hi[near, g] = a + np.searchsorted(v_sorted[a:b], hi_v[near], side="right")
-    counts = np.maximum(hi - lo, 0).reshape(-1)
-    total = int(counts.sum())
+    counts = np.maximum(hi - lo, 0)
+    per_left = counts.sum(axis=1)
+    counts = counts.reshape(-1)
+    total = int(per_left.sum())
     if total == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), row_rank
-    needle = np.repeat(np.arange(len(counts)), counts)
     pos = np.repeat(lo.reshape(-1) - np.cumsum(counts) + counts, counts) + np.arange(total)
-    return needle // len(levels), by_level[pos], row_rank
+    # the left keypoint of every pair: each one's pairs are consecutive (its ranges are laid out
+    # left keypoint by left keypoint), so one repeat by its total, not a repeat over every
+    # (keypoint, level) range and an integer division of every pair (issue 8)
+    return np.repeat(np.arange(len(left)), per_left), by_level[pos], row_rank
 
 
 def match_stereo(left: Features, right: Features | None, left_img: np.ndarray, right_img: np.ndarray,

@@ -1,0 +1,129 @@
+"""Keyframe culling (ORB-SLAM LocalMapping::KeyFrameCulling; Mur-Artal & Tardos 2017, §V-E of the
+ORB-SLAM2 paper: "discard all the keyframes in the local map whose 90 % of the map points have been
+seen in at least other three keyframes").
+
+Why here: on a still camera with a frequent keyframe cadence (configs/euroc.yaml's 3-frame cap,
+docs/notes/s14-jitter.md) every new keyframe observes the landmarks the earlier ones saw, so local
+BA's fixed set (every keyframe observing a local landmark) and the distinctive-descriptor update
+(O(n^2) in a landmark's observations) grow with every keyframe: local mapping's CPU per keyframe
+rose 17 -> 42 -> 94 ms over the EuRoC snippet's thirds (docs/notes/s15-stillcost.md). Dropping the
+keyframes whose landmarks others already see bounds both.
+
+What culling a keyframe means for the rest of the system:
+* its observations leave its landmarks (a landmark no other keyframe sees goes with it, as the
+  mapper's ``_cull`` would drop it at the next keyframe anyway);
+* its pose stays available read-only, relative to a parent keyframe (ORB-SLAM keeps a culled
+  keyframe's ``mTcp`` to its spanning-tree parent): ``MapStoreAccess.keyframe_poses`` /
+  ``keyframe_trajectory`` return it, so the frames that tracked against it (trajectory.tum,
+  frames.csv, the lockstep pipelines' final poses are ``T_world_ref @ T_ref_cam``) still follow
+  local BA's and the loop closer's corrections of the map;
+* the new keyframe (tracking's reference) and each map segment's first keyframe (the gauge
+  local BA holds fixed) are never culled, nor the newest ``keyframe_culling_keep_recent`` ones;
+* the loop closer keeps its own copy of every keyframe it was sent (canopy.loop.detector), so its
+  database and pose graph never ask the mapper for a culled one; corrections reach the mapper's
+  remaining keyframes and, through the parents, the culled ones.
+"""
+from __future__ import annotations
+
+from collections import Counter
+from itertools import chain
+
+import numpy as np
+
+
+def redundant_fraction(mapper, k: int, min_observers: int) -> float:
+    """Share of keyframe ``k``'s landmarks that at least ``min_observers`` other keyframes observe at
+    the same or a finer scale (octave <= k's octave + 1, ORB-SLAM's ``scaleLeveli <= scaleLevel+1``).
+    0 for a keyframe without landmarks. Every observation of k's landmarks is gathered into arrays
+    at C level (as local BA's edges, ``MapStoreAccess._observation_edges``): no Python step per one."""
+    rec = mapper.keyframes[k]
+    rows = np.flatnonzero(rec.landmark >= 0)
+    if len(rows) == 0:
+        return 0.0
+    obs = [mapper.landmarks[lid].obs for lid in rec.landmark[rows].tolist()]
+    n_obs = np.fromiter(map(len, obs), np.int64, len(obs))
+    total = int(n_obs.sum())
+    e_kf = np.fromiter(chain.from_iterable(obs), np.int64, total)
+    e_kp = np.fromiter(chain.from_iterable(o.values() for o in obs), np.int64, total)
+    # every observing keyframe's octaves laid end to end, found by an offset table
+    kf_ids = np.unique(e_kf)
+    table = np.concatenate([mapper.keyframes[kk].octave for kk in kf_ids.tolist()])
+    start = np.zeros(int(kf_ids[-1]) + 1, np.int64)
+    start[kf_ids] = np.cumsum([0] + [len(mapper.keyframes[kk].octave) for kk in kf_ids[:-1].tolist()])
+    limit = np.repeat(rec.octave[rows] + 1, n_obs)
+    counts = (e_kf != k) & (table[start[e_kf] + e_kp] <= limit)
+    per_landmark = np.add.reduceat(counts.astype(np.int64), np.cumsum(n_obs) - n_obs)
+    return float(np.count_nonzero(per_landmark >= min_observers)) / len(rows)
+
+
+def cull_keyframe(mapper, k: int) -> int:
+    """Remove keyframe ``k`` from the map: its observations leave its landmarks (landmarks left
+    without any are deleted), and its pose is kept relative to the remaining keyframe it shares the
+    most landmarks with (``mapper.culled_keyframes[k] = (parent, T_parent_k, timestamp)``). Returns the parent."""
+    rec = mapper.keyframes[k]
+    lids = rec.landmark[rec.landmark >= 0].tolist()
+    shared = Counter()
+    for lid in lids:
+        lm = mapper.landmarks.get(lid)
+        if lm is not None:
+            shared.update(kk for kk in lm.obs if kk != k)
+    same = [kk for kk in shared if mapper.keyframes[kk].segment == rec.segment]
+    if same:
+        parent = max(same, key=lambda kk: (shared[kk], kk))
+    else:  # no landmark shared: the nearest older keyframe of the segment (there is one: the first is never culled)
+        parent = max(kk for kk, r in mapper.keyframes.items() if kk < k and r.segment == rec.segment)
+    T_parent = mapper.keyframes[parent].T_world_cam
+    mapper.culled_keyframes[k] = (parent, np.linalg.inv(T_parent) @ rec.T_world_cam, rec.timestamp)
+    for lid in lids:
+        lm = mapper.landmarks.get(lid)
+        if lm is None:
+            continue
+        lm.obs.pop(k, None)
+        if not lm.obs:
+            del mapper.landmarks[lid]
+            mapper.n_culled += 1
+    if rec.line_landmark is not None:
+        for lid in rec.line_landmark[rec.line_landmark >= 0].tolist():
+            ln = mapper.lines.get(lid)
+            if ln is not None:
+                ln.obs.pop(k, None)
+    del mapper.keyframes[k]
+    getattr(mapper, "_no_triangulation", {}).pop(k, None)
+    mapper.n_keyframes_culled += 1
+    return parent
+
+
+def cull_redundant_keyframes(mapper, rec, covisible: dict[int, int]) -> list[int]:
+    """ORB-SLAM's KeyFrameCulling after keyframe ``rec``: each of its covisible keyframes (strongest
+    first, as GetVectorCovisibleKeyFrames) whose landmarks are more than ``keyframe_culling_redundancy``
+    (ORB-SLAM: nRedundantObservations > 0.9 nMPs) seen by ``keyframe_culling_observers`` other keyframes goes, in turn (a culled keyframe's
+    observations no longer count for the next). Protected: ``rec``, its segment's first keyframe, and
+    the newest ``keyframe_culling_keep_recent`` keyframes. Returns the culled keyframes' indices."""
+    p = mapper.params
+    first = mapper._segment_first[rec.segment]
+    recent = {r.index for r in sorted(mapper.keyframes.values(), key=lambda r: r.order)[-p.keyframe_culling_keep_recent:]} \
+        if p.keyframe_culling_keep_recent > 0 else set()
+    culled = []
+    for k in sorted(covisible, key=lambda kk: (-covisible[kk], -kk)):
+        if k == rec.index or k == first or k in recent or k not in mapper.keyframes \
+                or mapper.keyframes[k].segment != rec.segment:
+            continue
+        if redundant_fraction(mapper, k, p.keyframe_culling_observers) > p.keyframe_culling_redundancy:
+            cull_keyframe(mapper, k)
+            culled.append(k)
+    return culled
+
+
+def culled_pose(keyframes: dict, culled: dict, k: int) -> np.ndarray | None:
+    """World pose of culled keyframe ``k`` through its chain of parents (a parent may have been culled
+    after it); None when the chain ends at no keyframe."""
+    T = np.eye(4)
+    seen = set()
+    while k not in keyframes:
+        if k not in culled or k in seen:
+            return None
+        seen.add(k)
+        parent, T_pk = culled[k][:2]
+        T = T_pk @ T
+        k = parent
+    return keyframes[k].T_world_cam @ T
