@@ -27,6 +27,7 @@ from canopy.backend.keyframe_culling import cull_redundant_keyframes
 from canopy.backend.local_ba import LocalBundleAdjustmentMixin
 from canopy.backend.map_store import Keyframe, Landmark, LandmarkStore, LineLandmark, MapStoreAccess, local_map_update
 from canopy.backend.params import MappingParams
+from canopy.backend import point_confirmation as confirmation
 from canopy.backend.still_window import bounded_fixed, descriptor_observations, window_neighbours
 from canopy.backend.triangulation import check_tracker_ids, pair_gates, triangulate_with_partners, \
     triangulation_partners
@@ -91,7 +92,14 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         # keyframe's landmarks (a landmark missing there is made again by tracking from its noisy pose)
         ba_fixed = bounded_fixed(self, rec, local, fixed)
         if len(local) >= 1 and (len(ba_fixed) >= 1 or len(local) >= 2):
-            self._bundle_adjust(local, ba_fixed, kf.scale_factor)
+            p = self.params
+            if p.triangulate_new_points and p.triangulate_confirm and not p.triangulate_confirm_ba:
+                # mapping.triangulate_confirm_ba off: the unconfirmed triangulated landmarks sit out BA
+                with confirmation.hidden_from_ba(self, confirmation.pending_ids(
+                        self.landmarks, p.triangulate_id_base, p.triangulate_min_observations, rec.segment)):
+                    self._bundle_adjust(local, ba_fixed, kf.scale_factor)
+            else:
+                self._bundle_adjust(local, ba_fixed, kf.scale_factor)
         timings["ba"] = _ms(t0)
         t0 = time.perf_counter()
         self._cull(rec)
@@ -171,8 +179,13 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         with a monocular observation in both (local BA then weighs them as mono edges, or as
         stereo ones where the keypoint has a right-image match)."""
         p = self.params
-        partners = triangulation_partners(rec, self.keyframes, self._covisible(rec), p.triangulate_covisible,
+        if p.triangulate_fuse:   # Fuse (point_confirmation): the pending landmarks searched in rec
+            confirmation.fuse_into(self, rec, confirmation.pending_ids(
+                self.landmarks, p.triangulate_id_base, p.triangulate_min_observations, rec.segment), scale)
+        counts = self._covisible(rec)
+        partners = triangulation_partners(rec, self.keyframes, counts, p.triangulate_covisible,
                                           p.triangulate_min_baseline * self.calib.baseline)
+        first_new = self._next_triangulated_id
         for k, ka, kb, Pw in triangulate_with_partners(rec, self.keyframes, partners, self.calib, pair_gates(p),
                                                        scale, p.pixel_sigma, self._no_triangulation):
             b = self.keyframes[k]
@@ -185,6 +198,13 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
             rec.landmark[ka] = ids
             b.landmark[kb] = ids
             self.n_triangulated += len(ka)
+        if p.triangulate_fuse and self._next_triangulated_id > first_new:
+            # and rec's new landmarks searched in its best covisible keyframes (SearchInNeighbors)
+            new_ids = np.arange(first_new, self._next_triangulated_id, dtype=np.int64)
+            neigh = sorted((k for k in counts if self.keyframes[k].segment == rec.segment),
+                           key=lambda k: (-counts[k], -k))[: p.triangulate_fuse_neighbours]
+            for k in neigh:
+                confirmation.fuse_into(self, self.keyframes[k], new_ids, scale)
 
     def _insert_lines(self, kf: KeyframeData, rec: Keyframe) -> None:
         """Line observations of existing line landmarks, and new lines from stereo endpoints."""
@@ -334,6 +354,10 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
     # ----------------------------------------------------------------- update for tracking
     def _make_update(self, rec: Keyframe, local: list[int], fixed: list[int]) -> LocalMapUpdate:
         update = local_map_update(rec.index, self.keyframes, self.landmarks, local, fixed)
+        p = self.params
+        if p.triangulate_new_points and p.triangulate_confirm:   # unconfirmed: not for tracking yet
+            confirmation.withhold_unconfirmed(update, self.landmarks, p.triangulate_id_base,
+                                              p.triangulate_min_observations)
         if self.params.use_lines:
             lids = sorted({lid for k in list(local) + list(fixed)
                            for lid in self.keyframes[k].line_landmark.tolist() if lid >= 0})

@@ -104,6 +104,21 @@ class MappingParams:
     # (ORB-SLAM MapPointCulling: cnThObs 3 for stereo maps; it starts with two)
     triangulate_min_observations: int = 3
     triangulate_id_base: int = 1 << 20         # the mapper's own landmark ids (tracking counts from 0)
+    # --- confirmation of triangulated landmarks (canopy.backend.point_confirmation) -------
+    # ORB-SLAM's SearchInNeighbors / Fuse in the mapper: each new keyframe is searched for the
+    # triangulated landmarks still short of triangulate_min_observations, and the new keyframe's
+    # triangulated landmarks are searched for in its triangulate_fuse_neighbours best covisible
+    # keyframes. Off: bit-identical.
+    triangulate_fuse: bool = False
+    triangulate_fuse_neighbours: int = 6
+    # a triangulated landmark found on a keypoint that has a landmark already duplicates it: True
+    # moves its observations to that landmark (MapPoint::Replace), False only drops it
+    triangulate_fuse_merge: bool = True
+    # tracking's local map leaves out triangulated landmarks seen by fewer than
+    # triangulate_min_observations keyframes (s14: tracking using them early is what hurt)
+    triangulate_confirm: bool = False
+    # local BA uses the unconfirmed ones meanwhile (False: confirmed ones only)
+    triangulate_confirm_ba: bool = True
 
     def validate(self) -> "MappingParams":
         def need(ok: bool, name: str, what: str) -> None:
@@ -149,6 +164,7 @@ class MappingParams:
         need(0 <= self.triangulate_min_parallax_deg < 90, "triangulate_min_parallax_deg", "must be in [0, 90)")
         need(self.triangulate_min_observations >= 2, "triangulate_min_observations", "must be >= 2")
         need(self.triangulate_id_base >= 1, "triangulate_id_base", "must be >= 1")
+        need(self.triangulate_fuse_neighbours >= 0, "triangulate_fuse_neighbours", "must be >= 0")
         return self
 
     def __post_init__(self):
