@@ -97,18 +97,9 @@ def _reference_subpixel_refine(left_img, right_img, uvl, ur, octave, scale_facto
         sad = stereo._zero_mean_sad(patch_l.astype(np.int16), band.astype(np.int16), 2 * L + 1)
     else:
         sad = _loop_in_kpp_layout(patch_l, band, 2 * L + 1)
-    best = np.argmin(sad, axis=1)
-    interior = (best > 0) & (best < 2 * L)
-    idx = np.arange(len(sel))
-    b = np.clip(best, 1, 2 * L - 1)
-    d1, d2, d3 = sad[idx, b - 1], sad[idx, b], sad[idx, b + 1]
-    denom = 2.0 * (d1 + d3 - 2.0 * d2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        delta = np.where(denom > 0, (d1 - d3) / denom, 0.0)
-    delta = np.where(interior, delta, 0.0)
-    good = interior & (np.abs(delta) <= 1.0)
+    best, delta, best_sad, good = stereo.parabola_minimum(sad, L)
     u_out[sel] = s * (xr0 + (best - L) + delta)
-    sad_out[sel] = sad[idx, best]
+    sad_out[sel] = best_sad
     ok_out[sel] = good
     return u_out, sad_out, ok_out
 

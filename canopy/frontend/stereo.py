@@ -138,9 +138,20 @@ def subpixel_refine(left_img: np.ndarray, right_img: np.ndarray, uvl: np.ndarray
                              2 * L + 1)
     else:
         sad = _centre_sad(np.concatenate(patches), np.concatenate(bands), 2 * L + 1, sum_type)
+    best, delta, best_sad, good = parabola_minimum(sad, L)
+    u_out[sel] = s * (xr0 + (best - L) + delta)
+    sad_out[sel] = best_sad
+    ok_out[sel] = good
+    return u_out, sad_out, ok_out
+
+
+def parabola_minimum(sad: np.ndarray, L: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per row of ``sad`` ((K, 2L+1) costs over the shifts -L..L): the best shift's index, the
+    sub-pixel offset of the parabola through it and its two neighbours (ORB-SLAM2's ComputeStereoMatches),
+    the best cost, and whether the offset is trusted (an interior minimum, |offset| <= 1)."""
     best = np.argmin(sad, axis=1)
     interior = (best > 0) & (best < 2 * L)
-    idx = np.arange(len(sel))
+    idx = np.arange(len(sad))
     b = np.clip(best, 1, 2 * L - 1)
     d1, d2, d3 = sad[idx, b - 1], sad[idx, b], sad[idx, b + 1]
     denom = 2.0 * (d1 + d3 - 2.0 * d2)
@@ -148,10 +159,7 @@ def subpixel_refine(left_img: np.ndarray, right_img: np.ndarray, uvl: np.ndarray
         delta = np.where(denom > 0, (d1 - d3) / denom, 0.0)
     delta = np.where(interior, delta, 0.0)  # no parabola at the window's edge (ORB-SLAM2: rejected)
     good = interior & (np.abs(delta) <= 1.0)
-    u_out[sel] = s * (xr0 + (best - L) + delta)
-    sad_out[sel] = sad[idx, best]
-    ok_out[sel] = good
-    return u_out, sad_out, ok_out
+    return best, delta, sad[idx, best], good
 
 
 def _windows(image: np.ndarray, rows: int, cols: int) -> np.ndarray:
