@@ -51,7 +51,7 @@ from canopy.enhance.dehaze import dark_channel, dehaze_dark_channel, dehaze_inve
 from canopy.enhance.noise import estimate_noise
 from canopy.enhance.noisy_dark import denoise_frame  # s14-darkrows hook: the ε factor by σ
 from canopy.enhance.params import EnhanceParams
-from canopy.enhance.snr import snr_eps_factor  # s15-snr hook: the ε factor by the frame's texture SNR
+from canopy.enhance.snr import lit_denoise_wanted, snr_eps_factor  # s15-snr: the ε factor by the frame's texture SNR; s16: lit frames
 
 
 def auto_statistics(image: np.ndarray, params: EnhanceParams) -> dict:
@@ -208,7 +208,7 @@ def auto_treat_factor(image: np.ndarray, params: EnhanceParams | None = None
     sigma = estimate_noise(out, rows_fraction=params.noise_rows_fraction)
     if dark:
         sigma = max(sigma, params.auto_dark_min_sigma)
-    if dark or (params.auto_denoise_lit and sigma > params.auto_noise_sigma):
+    if dark or (params.auto_denoise_lit and lit_denoise_wanted(out, sigma, params)):
         factor = snr_eps_factor(out, sigma, params)
         return denoise_frame(out, sigma, params, factor), decision + ">dn", sigma, gamma, factor
     return out, decision, 0.0, 1.0, 0.0

@@ -26,7 +26,7 @@ from canopy.enhance.factory import METHOD_FUNCTIONS
 from canopy.enhance.noise import estimate_noise
 from canopy.enhance.noisy_dark import denoise_frame  # s14-darkrows hook: the ε factor by σ
 from canopy.enhance.params import EnhanceParams
-from canopy.enhance.snr import snr_eps_factor  # s15-snr hook: one ε factor for both images, from the left
+from canopy.enhance.snr import lit_denoise_wanted, snr_eps_factor  # s15-snr: one ε factor for both images, from the left; s16: lit frames
 
 
 class PairEnhancer:
@@ -68,7 +68,7 @@ class PairEnhancer:
         sigma = estimate_noise(lifted_l, rows_fraction=p.noise_rows_fraction)
         if dark:
             sigma = max(sigma, p.auto_dark_min_sigma)
-        elif not sigma > p.auto_noise_sigma:
+        elif not lit_denoise_wanted(lifted_l, sigma, p):
             return base_l, base_r, decision, 0.0, 1.0, 0.0
         factor = snr_eps_factor(lifted_l, sigma, p)
 

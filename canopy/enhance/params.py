@@ -60,6 +60,9 @@ class EnhanceParams:
     auto_dehaze_max_clip: float = 0.02  # dehazing may clip at most this much more of the frame, else afe
     auto_denoise_lit: bool = False   # also denoise well-lit frames (see canopy.enhance.auto, rule 3)
     auto_noise_sigma: float = 4.0    # with auto_denoise_lit: noise σ (grey levels) above this -> denoise
+    # with auto_denoise_lit: ... and only frames whose texture_snr (canopy.enhance.snr) is at most this
+    # (haze lowers it, docs/notes/s16-darkhaze.md); 0: no texture test
+    auto_denoise_lit_max_snr: float = 0.0
     auto_dark_min_sigma: float = 4.0  # under-exposed frames (agri) are always denoised, with σ at least this
     auto_dark_target_mean: float = 60.0   # under-exposed frames: power curve to this mean grey before denoising (0: off)
     auto_dark_min_gamma: float = 0.4      # ... with γ at least this (bounds the gain on the darkest levels)
@@ -106,7 +109,7 @@ class EnhanceParams:
                      "auto_dehaze_max_clip", "auto_noise_sigma", "auto_dark_min_sigma", "noise_rows_fraction",
                      "auto_dark_target_mean", "auto_dark_min_gamma",
                      "denoised_fallback_weight", "denoise_noisy_sigma", "denoise_eps_factor_noisy",
-                     "denoise_snr_low", "denoise_snr_high", "denoise_snr_quantile"):
+                     "denoise_snr_low", "denoise_snr_high", "denoise_snr_quantile", "auto_denoise_lit_max_snr"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
                 bad(name, "must be a finite number")

@@ -87,3 +87,18 @@ def snr_eps_factor(image: np.ndarray, sigma: float, params: EnhanceParams) -> fl
         return params.denoise_eps_factor_noisy
     t = (snr - lo) / (hi - lo)
     return params.denoise_eps_factor + t * (params.denoise_eps_factor_noisy - params.denoise_eps_factor)
+
+
+def lit_denoise_wanted(image: np.ndarray, sigma: float, params: EnhanceParams) -> bool:
+    """With ``auto_denoise_lit``: whether a well-lit frame of noise σ ``sigma`` is denoised. σ must
+    exceed ``auto_noise_sigma`` (s11's rule) and, with ``auto_denoise_lit_max_snr`` > 0, the frame's
+    ``texture_snr`` must be at most that: haze scales the texture by the transmission t and leaves the
+    sensor noise as it is, so a hazy noisy frame has less texture over its noise than a clear noisy
+    one (docs/notes/s16-darkhaze.md); s11-haze found the denoiser helped the generated presets' lit
+    hazy noisy cells but broke the clear noisy day-loop (6.7 -> 16.5 mm)."""
+    if not float(sigma) > params.auto_noise_sigma:
+        return False
+    if params.auto_denoise_lit_max_snr <= 0.0:
+        return True
+    snr = texture_snr(image, sigma, params.denoise_snr_downsample, params.denoise_snr_quantile)
+    return snr <= params.auto_denoise_lit_max_snr

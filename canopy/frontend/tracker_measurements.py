@@ -13,7 +13,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from canopy.enhance.noise import estimate_noise
 from canopy.frontend.features import Features
+from canopy.frontend.keypoint_uncertainty import disparity_sigma, measurement_sigma
+from canopy.frontend.pose import refine_pose
 from canopy.frontend.geometry import transform
 from canopy.frontend.stereo import StereoMatches
 from canopy.frontend.stereo_silhouette import ContourParams, SilhouetteDetector
@@ -31,6 +34,10 @@ class TrackerMeasurementsMixin:
 
     def _landmark_candidates(self, stereo: StereoMatches) -> np.ndarray:
         ok = stereo.valid if self.params.contour_landmarks else self._surface_stereo(stereo)
+        if not self.params.uncertain_stereo_landmarks:
+            uncertain = getattr(self, "_uncertain", None)
+            if uncertain is not None and uncertain[0] is stereo and uncertain[1] is not None:
+                ok = ok & ~uncertain[1]
         return ok & (stereo.depth < self._max_depth)
 
     def _close(self, stereo: StereoMatches) -> np.ndarray:
@@ -55,8 +62,32 @@ class TrackerMeasurementsMixin:
                 t0 = _clock()
                 stereo = self._flag_contours(*self._contour_inputs, stereo)
                 _stage(timings, "contour", t0)
+            self._uncertain = (stereo, self._uncertain_stereo(stereo))
             self._stereo_last, self._stereo_obs = stereo, self._bearing_only_far(stereo)
         return self._stereo_last
+
+    def _uncertain_stereo(self, stereo: StereoMatches) -> np.ndarray | None:
+        """Stereo points whose relative Cramér-Rao disparity sigma is at least
+        ``uncertain_stereo_max_rel_sigma`` on a frame whose robust noise sigma is at least
+        ``uncertain_stereo_min_noise`` (canopy.frontend.keypoint_uncertainty.disparity_sigma); None
+        when the option is off or the frame is under the noise gate (nothing changes)."""
+        p = self.params
+        if p.uncertain_stereo_max_rel_sigma <= 0 or self._contour_inputs is None:
+            return None
+        left_img, _, feats = self._contour_inputs
+        noise = feats.robust_noise_sigma
+        if noise is None:
+            noise = estimate_noise(left_img, rows_fraction=0.5)
+        if noise < p.uncertain_stereo_min_noise:
+            return None
+        idx = np.flatnonzero(stereo.valid)
+        out = np.zeros(len(stereo.depth), bool)
+        if len(idx):
+            uv = feats.uv[idx].astype(np.float32)
+            sd = disparity_sigma(left_img, uv, feats.octave[idx], self.scale_factors, noise, p.subpixel_window)
+            disp = self.calib.bf / stereo.depth[idx].astype(np.float64)
+            out[idx] = sd >= p.uncertain_stereo_max_rel_sigma * disp
+        return out
 
 
     def _make_silhouette_detector(self) -> SilhouetteDetector | None:
@@ -95,6 +126,10 @@ class TrackerMeasurementsMixin:
         mono = stereo.valid & (stereo.depth >= self._stereo_obs_depth)
         if stereo.on_contour is not None:
             mono |= stereo.on_contour
+        uncertain = getattr(self, "_uncertain", None)
+        if uncertain is not None and uncertain[0] is stereo and uncertain[1] is not None \
+                and self.params.uncertain_stereo_bearing_only:
+            mono |= uncertain[1]  # disparity the image cannot pin (_uncertain_stereo)
         return mono
 
     def _bearing_only_far(self, stereo: StereoMatches) -> StereoMatches:
@@ -123,7 +158,42 @@ class TrackerMeasurementsMixin:
     def _refine(self, T_cw, X, r, feats, stereo, inliers=None, line_obs=None):
         # far points as monocular measurements (see _bearing_only_far)
         obs = self._stereo_obs if stereo is self._stereo_last else stereo
-        return super()._refine(T_cw, X, r, feats, obs, inliers=inliers, line_obs=line_obs)
+        sigma = self._keypoint_sigma(feats)
+        if sigma is None:
+            return super()._refine(T_cw, X, r, feats, obs, inliers=inliers, line_obs=line_obs)
+        # per-keypoint sigma (keypoint_uncertainty.measurement_sigma): MapTrackingMixin._refine's call
+        # with that sigma in place of pixel_sigma * scale^octave
+        p = self.params
+        meas = np.concatenate([feats.uv[r].astype(np.float64), obs.u_right[r, None].astype(np.float64)], axis=1)
+        if line_obs is None:
+            return refine_pose(T_cw, X, meas, obs.valid[r], sigma[r], self.calib, p.pose_opt_rounds,
+                               p.pose_opt_iterations, p.chi2_mono, p.chi2_stereo, inliers=inliers)
+        A_w, B_w, coeffs = line_obs
+        return self._lt.refine_pose_points_lines(T_cw, X, meas, obs.valid[r], sigma[r], self.calib,
+                                                 p.pose_opt_rounds, p.pose_opt_iterations, p.chi2_mono,
+                                                 p.chi2_stereo, A_w, B_w, coeffs, p.line_sigma, p.chi2_line,
+                                                 inliers=inliers)
+
+    def _keypoint_sigma(self, feats: Features) -> np.ndarray | None:
+        """The frame's per-keypoint measurement sigma (``keypoint_sigma_weight`` > 0, frame robust
+        noise sigma >= ``uncertain_stereo_min_noise``), computed once per frame; None: ORB-SLAM's
+        per-level sigma (off, under the gate, or keypoints of another image)."""
+        p = self.params
+        if p.keypoint_sigma_weight <= 0 or self._contour_inputs is None or self._contour_inputs[2] is not feats:
+            return None
+        cached = getattr(self, "_kp_sigma", None)
+        if cached is not None and cached[0] is feats:
+            return cached[1]
+        left_img = self._contour_inputs[0]
+        noise = feats.robust_noise_sigma
+        if noise is None:
+            noise = estimate_noise(left_img, rows_fraction=0.5)
+        sigma = None
+        if noise >= p.uncertain_stereo_min_noise and len(feats):
+            sigma = measurement_sigma(left_img, feats.uv.astype(np.float32), feats.octave, self.scale_factors,
+                                      p.pixel_sigma, noise, p.keypoint_sigma_weight)
+        self._kp_sigma = (feats, sigma)
+        return sigma
 
     def _record_viewing(self, ids: np.ndarray, pos: np.ndarray, centre: np.ndarray, octave: np.ndarray) -> None:
         """ORB-SLAM's MapPoint normal and max distance (UpdateNormalAndDepth) at creation:
