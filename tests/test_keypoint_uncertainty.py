@@ -1,9 +1,9 @@
-"""Per-keypoint uncertainty (canopy.frontend.keypoint_uncertainty): the Cramér-Rao disparity sigma
+"""Stereo disparity uncertainty (canopy.frontend.keypoint_uncertainty): the Cramér-Rao disparity sigma
 predicts which stereo matches scatter, on a generated stereo pair with an exact disparity."""
 import cv2
 import numpy as np
 
-from canopy.frontend.keypoint_uncertainty import disparity_sigma, location_sigma
+from canopy.frontend.keypoint_uncertainty import disparity_sigma
 from canopy.frontend.stereo import subpixel_refine
 
 SCALES = 1.2 ** np.arange(8)
@@ -59,18 +59,17 @@ def test_disparity_sigma_predicts_the_scatter_of_sad_disparities():
     assert np.median(sd[lo]) < 3 * rms_lo and rms_lo < 3 * np.median(sd[lo]) + 0.1
 
 
-def test_noise_only_windows_get_the_cap_and_clean_texture_a_small_sigma():
+def test_noise_only_windows_get_no_bound_and_clean_texture_a_small_one():
     rng = np.random.default_rng(0)
     flat = np.clip(128 + rng.normal(0, 6.0, (100, 100)), 0, 255).astype(np.uint8)
     uv = np.array([[50.0, 50.0], [30.0, 60.0]], np.float32)
     oc = np.zeros(2, np.int32)
-    # a flat patch: its gradients are the noise's (the tensor's noise part removed: no signal left)
-    assert np.all(location_sigma(flat, uv, oc, SCALES, 6.0, max_sigma_px=8.0) > 0.5)
-    assert np.all(~np.isfinite(disparity_sigma(flat, uv, oc, SCALES, 6.0, 5)) |
-                  (disparity_sigma(flat, uv, oc, SCALES, 6.0, 5) > 1.0))
+    # a flat patch: its gradients are the noise's (the tensor's noise part removed, little or no signal)
+    sd = disparity_sigma(flat, uv, oc, SCALES, 6.0, 5)
+    assert np.all(~np.isfinite(sd) | (sd > 1.0)), sd
     left, _ = _pair(0, 1.0)
-    s = location_sigma(left, np.array([[60.0, 100.0]], np.float32), np.zeros(1, np.int32), SCALES, 1.0)
-    assert s[0] < 0.1
+    sd = disparity_sigma(left, np.array([[60.0, 100.0]], np.float32), np.zeros(1, np.int32), SCALES, 1.0, 5)
+    assert sd[0] < 0.05
 
 
 # ---------------------------------------------------------------- the tracker's rule on a real pair
@@ -106,8 +105,7 @@ def test_uncertain_stereo_points_create_no_landmarks_and_the_rest_is_unchanged()
     hazy = StereoFrame(f.index, f.timestamp, degrade_image(f.left, cell, ray, rng=0),
                        degrade_image(f.right, cell, ray, rng=1))
     base = replace(load_run_config("kitti").tracking, parallel_extraction=False)
-    rule = replace(base, uncertain_stereo_max_rel_sigma=0.05, uncertain_stereo_bearing_only=False,
-                   uncertain_stereo_landmarks=False)
+    rule = replace(base, uncertain_stereo_max_rel_sigma=0.05)  # the defaults: landmarks withheld, not bearing-only
     _, kf0 = _first_keyframe(hazy, base, src.calibration)
     tracker, kf1 = _first_keyframe(hazy, rule, src.calibration)
     np.testing.assert_array_equal(kf0.depth, kf1.depth)       # the matches are untouched
@@ -144,7 +142,8 @@ def test_bearing_only_switch_drops_the_right_column_of_exactly_the_uncertain_poi
                        degrade_image(f.right, cell, ray, rng=3))
     base = replace(load_run_config("kitti").tracking, parallel_extraction=False)
     _, kf0 = _first_keyframe(hazy, base, src.calibration)
-    tracker, kf1 = _first_keyframe(hazy, replace(base, uncertain_stereo_max_rel_sigma=0.05), src.calibration)
+    tracker, kf1 = _first_keyframe(hazy, replace(base, uncertain_stereo_max_rel_sigma=0.05, uncertain_stereo_bearing_only=True,
+                                                  uncertain_stereo_landmarks=True), src.calibration)
     uncertain = tracker._uncertain[1]
     assert uncertain.any()
     np.testing.assert_array_equal(kf1.u_right, np.where(uncertain, -1.0, kf0.u_right).astype(np.float32))

@@ -1,32 +1,22 @@
-"""Per-keypoint measurement uncertainty from the image noise and the keypoint's local gradients
-(issue 9: haze + a noisy sensor).
+"""How well the image pins a stereo match's disparity (issue 9: haze + a noisy sensor), and the
+landmarks that should not be made from it.
 
-ORB-SLAM gives every keypoint of a pyramid level the same information, 1 / (pixel_sigma ·
-scale^octave)² (Optimizer::PoseOptimization's invSigma2). On a noisy sensor behind haze that is
-wrong by a wide margin: haze scales a patch's contrast by the transmission t (Koschmieder,
-I = J·t + A·(1 − t)) and the sensor adds a fixed noise σ_n, so a far corner's gradients sit a few
-σ_n above the noise and its position scatters by pixels while a near corner's does not.
+Haze scales a patch's contrast by the transmission t (Koschmieder, I = J·t + A·(1 − t)) and the sensor
+adds a fixed noise σ_n, so the SAD search of a far hazy corner compares windows whose gradients sit a
+few σ_n above the noise: its disparity scatters by pixels, and the depth of a landmark made from it by
+tens of percent. ORB-SLAM trusts stereo depth by distance alone (ThDepth); the image says more.
 
-The bound used here is the Cramér-Rao / Förstner one for locating a patch of known appearance
-in white noise (Förstner & Gülch 1987; Kanazawa & Kanatani, "Do we really have to consider
-covariance matrices for image features?", ICCV 2001; Zeisl et al., "Estimation of location
-uncertainty for scale invariant feature points", BMVC 2009):
+The bound is the Cramér-Rao / Förstner one for aligning a window of known appearance in white noise
+(Förstner & Gülch 1987; Kanazawa & Kanatani, "Do we really have to consider covariance matrices for
+image features?", ICCV 2001): with M = Σ_window ∇I ∇Iᵀ (the structure tensor), Σ_shift = σ_n² M⁻¹.
+The stereo search moves the window along the row only, so the disparity's bound is the 1-D one,
+σ_d² = 2 σ_n² / Σ gx² (both images carry the noise), with the tensor's own noise part removed first:
+each central difference of white noise has variance σ_n² / 2, so E[Σ gx²] = Σ gx²_signal + n σ_n² / 2
+over n window pixels. The window is sampled on level 0 at the keypoint's scale (a (2h+3)² grid at
+spacing s^o, bilinear), standing in for the level-o image the SAD ran on.
 
-    Σ_loc = σ_n² · M⁻¹,    M = Σ_window ∇I ∇Iᵀ   (the structure tensor, Harris' matrix)
-
-with the tensor's noise part removed first: each central difference of white noise has variance
-σ_n² / 2 per axis, so E[M] = M_signal + n · σ_n² / 2 · I over n window pixels. A keypoint whose
-gradients are noise only has M_signal ≈ 0 and gets the largest sigma (``max_sigma_px``).
-
-The pose refinement takes one scalar sigma per keypoint (the same for u, v and u_right), so the
-isotropic mean variance trace(Σ_loc) / 2 is used, in level-o pixels, scaled to level 0 by
-scale^o, and added in quadrature to ORB-SLAM's per-level sigma (which stands for the detector's
-quantisation and everything else the bound does not see):
-
-    σ_i² = (pixel_sigma · s^o)² + weight · s^(2o) · σ_n² · trace(M_signal⁻¹) / 2
-
-The window is sampled on level 0 at the keypoint's scale (a (2h+3)² grid at spacing s^o, bilinear),
-which stands in for the level-o image the keypoint was detected on.
+σ_d / d is the relative depth sigma of the point (z = b f / d). ``TrackerMeasurementsMixin`` withholds
+landmarks from points where it is large (``tracking.uncertain_stereo_*``, docs/notes/s16-darkhaze.md).
 """
 from __future__ import annotations
 
@@ -58,36 +48,6 @@ def structure_tensor_at(image: np.ndarray, uv: np.ndarray, spacing: np.ndarray,
     sxy = np.einsum("kij,kij->k", gx, gy)
     syy = np.einsum("kij,kij->k", gy, gy)
     return sxx, sxy, syy, (2 * h + 1) ** 2
-
-
-def location_sigma(image: np.ndarray, uv: np.ndarray, octave: np.ndarray, scale_factors: np.ndarray,
-                   noise_sigma: float, half_window: int = 3, max_sigma_px: float = 8.0) -> np.ndarray:
-    """Cramér-Rao (Förstner) localisation sigma of each keypoint in level-0 px (module doc):
-    sqrt(σ_n² · trace(M_signal⁻¹) / 2) · s^o, capped at ``max_sigma_px`` · s^o."""
-    spacing = scale_factors[octave]
-    sxx, sxy, syy, n = structure_tensor_at(image, uv, spacing, half_window)
-    noise_part = n * noise_sigma**2 / 2.0
-    # eigenvalues of the 2x2 tensor, its noise part removed (E[M] = M_signal + n σ²/2 I)
-    half_tr = 0.5 * (sxx + syy)
-    disc = np.sqrt(np.maximum(0.25 * (sxx - syy) ** 2 + sxy**2, 0.0))
-    lam_small = np.maximum(half_tr - disc - noise_part, 0.0)
-    lam_large = np.maximum(half_tr + disc - noise_part, 0.0)
-    # trace(M⁻¹) / 2 = (1/λ1 + 1/λ2) / 2; a zero eigenvalue is an unbounded variance: the cap
-    cap = max_sigma_px**2
-    with np.errstate(divide="ignore"):
-        var = 0.5 * noise_sigma**2 * (1.0 / lam_small + 1.0 / lam_large)
-    var = np.minimum(np.where(np.isfinite(var), var, cap), cap)
-    return np.sqrt(var) * spacing
-
-
-def measurement_sigma(image: np.ndarray, uv: np.ndarray, octave: np.ndarray, scale_factors: np.ndarray,
-                      pixel_sigma: float, noise_sigma: float, weight: float, half_window: int = 3,
-                      max_sigma_px: float = 8.0) -> np.ndarray:
-    """The pose refinement's per-keypoint sigma (level-0 px): ORB-SLAM's pixel_sigma · s^o and the
-    localisation bound added in quadrature, ``weight`` scaling the bound's variance (module doc)."""
-    base = pixel_sigma * scale_factors[octave]
-    loc = location_sigma(image, uv, octave, scale_factors, noise_sigma, half_window, max_sigma_px)
-    return np.sqrt(base**2 + weight * loc**2)
 
 
 def disparity_sigma(image: np.ndarray, uv: np.ndarray, octave: np.ndarray, scale_factors: np.ndarray,

@@ -327,20 +327,17 @@ class TrackingParams:
     stereo_fill_min_sigma: float = 0.0
     stereo_fill_max_sigma: float = 0.0
     stereo_fill_max_texture: float = 0.0  # ... and texture excess (mean - robust sigma) below this (0: no test)
-    # Stereo points whose disparity the image cannot pin (canopy.frontend.keypoint_uncertainty, issue 9's
+    # Stereo points whose disparity the image cannot pin (canopy.frontend.keypoint_uncertainty; issue 9's
     # haze + noisy sensor): on frames whose robust noise sigma is >= uncertain_stereo_min_noise, a stereo
     # point whose Cramer-Rao disparity sigma (the 11x11 SAD window's x-gradients against the noise) is at
-    # least uncertain_stereo_max_rel_sigma x its disparity (= its relative depth sigma) is measured
-    # bearing-only in pose refinement and BA, as ORB-SLAM's ThDepth does for far points; its depth still
-    # initialises landmarks. 0: off (docs/notes/s16-darkhaze.md).
+    # least uncertain_stereo_max_rel_sigma x its disparity (= its relative depth sigma) makes no landmark
+    # (uncertain_stereo_landmarks false) and/or is measured bearing-only in pose refinement and BA
+    # (uncertain_stereo_bearing_only, ORB-SLAM's ThDepth role; measured worse). 0: off
+    # (docs/notes/s16-darkhaze.md).
     uncertain_stereo_max_rel_sigma: float = 0.0
     uncertain_stereo_min_noise: float = 4.0
-    uncertain_stereo_bearing_only: bool = True  # those points bearing-only in pose refinement and BA
-    uncertain_stereo_landmarks: bool = True     # False: those points create no landmark
-    # ... and, on such frames, the pose refinement's sigma per keypoint: ORB-SLAM's pixel_sigma x
-    # scale^octave plus keypoint_sigma_weight x the Cramer-Rao localisation variance from the keypoint's
-    # structure tensor against the noise, in quadrature (keypoint_uncertainty.measurement_sigma). 0: off.
-    keypoint_sigma_weight: float = 0.0
+    uncertain_stereo_bearing_only: bool = False
+    uncertain_stereo_landmarks: bool = False
 
     def disparity_offset_for(self, extractor: str) -> float:
         """The calibrated disparity offset for keypoints found by ``extractor`` (Features.extractor)."""
@@ -452,7 +449,6 @@ class TrackingParams:
         need(self.noisy_extractor_n_features >= 0, "noisy_extractor_n_features", "must be >= 0 (0: n_features)")
         need(self.uncertain_stereo_max_rel_sigma >= 0, "uncertain_stereo_max_rel_sigma", "must be >= 0 (0: off)")
         need(self.uncertain_stereo_min_noise >= 0, "uncertain_stereo_min_noise", "must be >= 0")
-        need(self.keypoint_sigma_weight >= 0, "keypoint_sigma_weight", "must be >= 0 (0: off)")
         return self
 
     def __post_init__(self):

@@ -15,8 +15,7 @@ import numpy as np
 
 from canopy.enhance.noise import estimate_noise
 from canopy.frontend.features import Features
-from canopy.frontend.keypoint_uncertainty import disparity_sigma, measurement_sigma
-from canopy.frontend.pose import refine_pose
+from canopy.frontend.keypoint_uncertainty import disparity_sigma
 from canopy.frontend.geometry import transform
 from canopy.frontend.stereo import StereoMatches
 from canopy.frontend.stereo_silhouette import ContourParams, SilhouetteDetector
@@ -158,42 +157,7 @@ class TrackerMeasurementsMixin:
     def _refine(self, T_cw, X, r, feats, stereo, inliers=None, line_obs=None):
         # far points as monocular measurements (see _bearing_only_far)
         obs = self._stereo_obs if stereo is self._stereo_last else stereo
-        sigma = self._keypoint_sigma(feats)
-        if sigma is None:
-            return super()._refine(T_cw, X, r, feats, obs, inliers=inliers, line_obs=line_obs)
-        # per-keypoint sigma (keypoint_uncertainty.measurement_sigma): MapTrackingMixin._refine's call
-        # with that sigma in place of pixel_sigma * scale^octave
-        p = self.params
-        meas = np.concatenate([feats.uv[r].astype(np.float64), obs.u_right[r, None].astype(np.float64)], axis=1)
-        if line_obs is None:
-            return refine_pose(T_cw, X, meas, obs.valid[r], sigma[r], self.calib, p.pose_opt_rounds,
-                               p.pose_opt_iterations, p.chi2_mono, p.chi2_stereo, inliers=inliers)
-        A_w, B_w, coeffs = line_obs
-        return self._lt.refine_pose_points_lines(T_cw, X, meas, obs.valid[r], sigma[r], self.calib,
-                                                 p.pose_opt_rounds, p.pose_opt_iterations, p.chi2_mono,
-                                                 p.chi2_stereo, A_w, B_w, coeffs, p.line_sigma, p.chi2_line,
-                                                 inliers=inliers)
-
-    def _keypoint_sigma(self, feats: Features) -> np.ndarray | None:
-        """The frame's per-keypoint measurement sigma (``keypoint_sigma_weight`` > 0, frame robust
-        noise sigma >= ``uncertain_stereo_min_noise``), computed once per frame; None: ORB-SLAM's
-        per-level sigma (off, under the gate, or keypoints of another image)."""
-        p = self.params
-        if p.keypoint_sigma_weight <= 0 or self._contour_inputs is None or self._contour_inputs[2] is not feats:
-            return None
-        cached = getattr(self, "_kp_sigma", None)
-        if cached is not None and cached[0] is feats:
-            return cached[1]
-        left_img = self._contour_inputs[0]
-        noise = feats.robust_noise_sigma
-        if noise is None:
-            noise = estimate_noise(left_img, rows_fraction=0.5)
-        sigma = None
-        if noise >= p.uncertain_stereo_min_noise and len(feats):
-            sigma = measurement_sigma(left_img, feats.uv.astype(np.float32), feats.octave, self.scale_factors,
-                                      p.pixel_sigma, noise, p.keypoint_sigma_weight)
-        self._kp_sigma = (feats, sigma)
-        return sigma
+        return super()._refine(T_cw, X, r, feats, obs, inliers=inliers, line_obs=line_obs)
 
     def _record_viewing(self, ids: np.ndarray, pos: np.ndarray, centre: np.ndarray, octave: np.ndarray) -> None:
         """ORB-SLAM's MapPoint normal and max distance (UpdateNormalAndDepth) at creation:
