@@ -19,7 +19,7 @@ from canopy.pipeline import MapUpdateSchedule, effective_map_update_lag  # noqa:
 from canopy.sources import open_source  # noqa: E402
 from shared.types import StereoFrame  # noqa: E402
 
-spent = []
+spent, flagged = [], []
 orig = TrackerMeasurementsMixin._uncertain_stereo
 
 
@@ -27,6 +27,8 @@ def timed(self, stereo):
     t0 = time.thread_time()
     out = orig(self, stereo)
     spent.append(1000 * (time.thread_time() - t0))
+    if out is not None:
+        flagged.append((int(out.sum()), int(stereo.valid.sum())))
     return out
 
 
@@ -52,4 +54,6 @@ for i in range(len(src)):
         schedule.keyframe_sent(res.keyframe.index, fr.index)
         schedule.hold(mapper.insert_keyframe(res.keyframe))
 print(f"{Path(sys.argv[1]).name}: rule {np.median(spent):.2f} ms p50, {np.percentile(spent, 90):.2f} p90 thread CPU "
-      f"over {len(spent)} frames; track() thread CPU p50 {np.median(track_cpu):.1f} ms")
+      f"over {len(spent)} frames; track() thread CPU p50 {np.median(track_cpu):.1f} ms; flagged per frame p50 "
+      f"{np.median([f for f, _ in flagged]) if flagged else 0:.0f} of {np.median([n for _, n in flagged]) if flagged else 0:.0f} "
+      f"stereo points ({len(flagged)} frames over the noise gate)")
