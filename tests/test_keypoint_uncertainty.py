@@ -104,7 +104,7 @@ def test_uncertain_stereo_points_create_no_landmarks_and_the_rest_is_unchanged()
                          read_noise=NOISE_LEVELS["high"][1])
     hazy = StereoFrame(f.index, f.timestamp, degrade_image(f.left, cell, ray, rng=0),
                        degrade_image(f.right, cell, ray, rng=1))
-    base = replace(load_run_config("kitti").tracking, parallel_extraction=False)
+    base = replace(load_run_config("kitti").tracking, parallel_extraction=False, uncertain_stereo_max_rel_sigma=0.0)
     rule = replace(base, uncertain_stereo_max_rel_sigma=0.05)  # the defaults: landmarks withheld, not bearing-only
     _, kf0 = _first_keyframe(hazy, base, src.calibration)
     tracker, kf1 = _first_keyframe(hazy, rule, src.calibration)
@@ -140,7 +140,7 @@ def test_bearing_only_switch_drops_the_right_column_of_exactly_the_uncertain_poi
                          read_noise=NOISE_LEVELS["high"][1])
     hazy = StereoFrame(f.index, f.timestamp, degrade_image(f.left, cell, ray, rng=2),
                        degrade_image(f.right, cell, ray, rng=3))
-    base = replace(load_run_config("kitti").tracking, parallel_extraction=False)
+    base = replace(load_run_config("kitti").tracking, parallel_extraction=False, uncertain_stereo_max_rel_sigma=0.0)
     _, kf0 = _first_keyframe(hazy, base, src.calibration)
     tracker, kf1 = _first_keyframe(hazy, replace(base, uncertain_stereo_max_rel_sigma=0.05, uncertain_stereo_bearing_only=True,
                                                   uncertain_stereo_landmarks=True), src.calibration)
@@ -148,3 +148,10 @@ def test_bearing_only_switch_drops_the_right_column_of_exactly_the_uncertain_poi
     assert uncertain.any()
     np.testing.assert_array_equal(kf1.u_right, np.where(uncertain, -1.0, kf0.u_right).astype(np.float32))
     np.testing.assert_array_equal(kf1.new_landmark_ids >= 0, kf0.new_landmark_ids >= 0)  # landmarks kept
+
+
+def test_configs_turn_the_rule_on_for_kitti_only():
+    assert load_run_config("kitti").tracking.uncertain_stereo_max_rel_sigma == 0.1
+    assert not load_run_config("kitti").tracking.uncertain_stereo_bearing_only
+    for name in ("euroc", "synthetic"):
+        assert load_run_config(name).tracking.uncertain_stereo_max_rel_sigma == 0.0
