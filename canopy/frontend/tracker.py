@@ -47,7 +47,8 @@ from canopy.frontend.track_health import (LOST_TOO_FEW_MATCHES, LOST_TOO_FEW_STE
 from canopy.frontend.tracker_lines import TrackerLinesMixin
 from canopy.frontend.tracker_measurements import TrackerMeasurementsMixin
 from canopy.frontend.tracker_reloc import TrackerRelocalisationMixin
-from canopy.frontend.tracker_worker import StereoJob, TrackerFeaturesMixin, record_stage as _stage, stage_clock as _clock
+from canopy.frontend.tracker_worker import (ExtractedFrame, StereoJob, TrackerFeaturesMixin, record_stage as _stage,
+                                           stage_clock as _clock)
 from shared.arrays import isin_ids, unique_sorted
 from shared.types import StereoCalibration, StereoFrame
 
@@ -170,6 +171,16 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
               fast_fallback: int | None = None, fast_min_keypoints: int = 0) -> TrackingResult:
         """Track one stereo frame. ``fast_threshold`` / ``fast_fallback`` override the
         FAST threshold (AFE Eq. 18 / Eq. 19 when too few of ``fast_min_keypoints``)."""
+        return self.track_extracted(self.extract(frame, fast_threshold, fast_fallback, fast_min_keypoints))
+
+    def extract(self, frame: StereoFrame, fast_threshold: int | None = None,
+                fast_fallback: int | None = None, fast_min_keypoints: int = 0) -> ExtractedFrame:
+        """The first half of ``track``: the frame's noise, its left ORB features (this thread) and
+        its stereo matches (with ``parallel_stereo`` a job left running on the worker). None of it
+        reads the local map, so a lockstep run may call this before applying the map updates due
+        at this frame (``apply_map_update``) and ``track_extracted`` after: the same result as
+        ``track`` with the updates applied first (the extraction overlaps local mapping's BA
+        instead of waiting for it; ``actors.tracking``)."""
         timings: dict[str, float] = {}
         t_all = t0 = _clock()
         self._stereo_last = self._stereo_raw = None
@@ -187,6 +198,14 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
         left, stereo, line_job = self._left_and_stereo(frame, (fast_threshold, fast_fallback, fast_min_keypoints),
                                                        noise_sigma, timings)
         self._contour_inputs = (frame.left, frame.right, left)  # for _stereo's contour test
+        return ExtractedFrame(frame, left, stereo, line_job, noise_sigma, timings, t_all)
+
+    def track_extracted(self, ex: ExtractedFrame, paused_s: float = 0.0) -> TrackingResult:
+        """The second half of ``track`` (the pose against the local map, the keyframe decision) for
+        the frame ``extract`` returned last. ``paused_s``: wall time spent between the two halves on
+        something else (waiting for a map update), left out of the ``total`` stage."""
+        frame, left, stereo, line_job, noise_sigma, timings = (ex.frame, ex.left, ex.stereo, ex.line_job,
+                                                               ex.noise_sigma, ex.timings)
         if not isinstance(stereo, StereoJob):
             stereo = self._stereo(stereo, timings)
         lines = None
@@ -211,7 +230,8 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
             self._finish_line_jobs(res.is_keyframe)
             timings.update(self._line_timings)
             self._line_timings.clear()
-        _stage(timings, "total", t_all)
+        _stage(timings, "total", ex.t_all)
+        timings["total"] -= paused_s * 1e3
         res.timings = timings
         return res
 
