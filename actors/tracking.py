@@ -11,6 +11,7 @@ keyframe carry over to the frame.
 """
 from __future__ import annotations
 
+import sys
 import threading
 import time
 
@@ -44,6 +45,10 @@ class TrackingActor(Actor):
         n_cv = int(getattr(c["params"], "opencv_threads", 0))
         if n_cv > 0:
             cv2.setNumThreads(n_cv)
+        # the GIL's hand-over interval between the tracking thread and its worker (TrackingParams.switch_interval_ms)
+        switch_ms = float(getattr(c["params"], "switch_interval_ms", 0.0))
+        if switch_ms > 0:
+            sys.setswitchinterval(switch_ms / 1e3)
         if c.get("sensor", "stereo") == "mono":
             from canopy.mono import MonoTracker
             self.tracker = MonoTracker(c["calib"], c["params"], c.get("mono"))

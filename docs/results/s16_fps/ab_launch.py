@@ -39,11 +39,14 @@ def variant_config(checkout: Path, dataset: str, overrides: list[str], folder: P
     return path
 
 
-def run_once(checkout: Path, config: Path, dataset: str, out: Path, max_frames: int | None) -> dict:
+def run_once(checkout: Path, config: Path, dataset: str, out: Path, max_frames: int | None,
+             path: str | None = None) -> dict:
     env = {**os.environ, "PYTHONPATH": str(checkout)}
     cmd = [sys.executable, "launch.py", "--dataset", dataset, "--config", str(config), "--out", str(out), "--quiet"]
     if max_frames:
         cmd += ["--max-frames", str(max_frames)]
+    if path:
+        cmd += ["--path", path]
     load0 = os.getloadavg()[0]
     t0 = time.monotonic()
     proc = subprocess.run(cmd, cwd=checkout, env=env, capture_output=True, text=True)
@@ -75,6 +78,7 @@ def main(argv=None) -> int:
     ap.add_argument("--variant", action="append", required=True, help="CHECKOUT[:section.key=value[,...]]")
     ap.add_argument("--dataset", default="kitti")
     ap.add_argument("--max-frames", type=int, default=None)
+    ap.add_argument("--path", default=None, help="dataset folder (default: the bundled snippet)")
     ap.add_argument("--reps", type=int, default=3)
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
@@ -88,7 +92,7 @@ def main(argv=None) -> int:
                          "runs": []})
     for rep in range(args.reps):
         for i, v in enumerate(variants):
-            r = run_once(v["checkout"], v["config"], args.dataset, tmp / f"run_v{i}_r{rep}", args.max_frames)
+            r = run_once(v["checkout"], v["config"], args.dataset, tmp / f"run_v{i}_r{rep}", args.max_frames, args.path)
             v["runs"].append(r)
             print(f"rep {rep} v{i} {r['fps_streaming']:6.2f} fps  cpu {r['cpu_total_ms_per_frame']:6.1f} ms/frame  "
                   f"map wait {((r['wait_ms'] or {}).get('map_update') or {}).get('mean', float('nan')):6.2f}  "
