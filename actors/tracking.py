@@ -11,6 +11,7 @@ keyframe carry over to the frame.
 """
 from __future__ import annotations
 
+import sys
 import threading
 import time
 
@@ -44,6 +45,10 @@ class TrackingActor(Actor):
         n_cv = int(getattr(c["params"], "opencv_threads", 0))
         if n_cv > 0:
             cv2.setNumThreads(n_cv)
+        # the GIL's hand-over interval between the tracking thread and its worker (TrackingParams.switch_interval_ms)
+        switch_ms = float(getattr(c["params"], "switch_interval_ms", 0.0))
+        if switch_ms > 0:
+            sys.setswitchinterval(switch_ms / 1e3)
         if c.get("sensor", "stereo") == "mono":
             from canopy.mono import MonoTracker
             self.tracker = MonoTracker(c["calib"], c["params"], c.get("mono"))
@@ -56,6 +61,8 @@ class TrackingActor(Actor):
         lag = effective_map_update_lag(int(c.get("map_update_lag_frames", 0)), c["params"],
                                        c.get("sensor", "stereo"))
         self.schedule = MapUpdateSchedule(lag) if self.lockstep else None
+        # lockstep: a frame's features before waiting for the map updates due at it (runtime.lockstep_extract_ahead)
+        self.extract_ahead = bool(c.get("extract_ahead", True)) and hasattr(self.tracker, "extract")
         enh = c.get("enhancement")
         self.adaptive_fast = bool(enh is not None and getattr(enh, "adaptive_fast", False)
                                   and enh.method in ADAPTIVE_FAST_METHODS)
@@ -127,23 +134,44 @@ class TrackingActor(Actor):
         except SlotOverwritten:
             ctx.dropped += 1
         else:
-            if self.schedule is not None:
+            frame = StereoFrame(index, stamp, left, right)
+            if self.schedule is not None and self.extract_ahead:
+                # the frame's ORB and stereo matches need no map: computed while local mapping may
+                # still be adjusting the keyframe whose update is due now (the same result)
+                self._start_sched()
+                extracted = self.tracker.extract(frame, **self._fast_arguments(frame, handle))
+                t0 = time.perf_counter()
                 self._apply_due_updates(index, ctx)
-            self._track(StereoFrame(index, stamp, left, right), handle, ctx)
+                self._track(frame, handle, ctx, extracted, time.perf_counter() - t0)
+            else:
+                if self.schedule is not None:
+                    self._apply_due_updates(index, ctx)
+                self._track(frame, handle, ctx)
         return handle.sent_at
 
-    def _track(self, frame: StereoFrame, handle: FrameHandle, ctx: ActorContext) -> None:
+    def _start_sched(self) -> None:
+        if self.sched_start is None:  # the threads' statistics from the first frame on
+            self.sched_start = thread_schedstat()
+            self.sched_start_wall = time.perf_counter()
+
+    def _fast_arguments(self, frame: StereoFrame, handle: FrameHandle) -> dict:
         # AFE Eq. 18, and Eq. 19 when too few corners result; only on frames the enhancement changed
         # (auto's "none" frames keep the fixed threshold, so auto costs nothing on clean data)
         # (rule: canopy.enhance.fast.tracking_fast_arguments; denoised dark frames fill the feature budget)
-        if self.sched_start is None:
-            self.sched_start = thread_schedstat()
-            self.sched_start_wall = time.perf_counter()
-        if self.adaptive_fast:
-            res = self.tracker.track(frame, **tracking_fast_arguments(
-                frame.left, (handle.info or {}).get("method", "none"), self.enhancement, self.n_features))
+        if not self.adaptive_fast:
+            return {}
+        return tracking_fast_arguments(frame.left, (handle.info or {}).get("method", "none"), self.enhancement,
+                                       self.n_features)
+
+    def _track(self, frame: StereoFrame, handle: FrameHandle, ctx: ActorContext, extracted=None,
+               paused_s: float = 0.0) -> None:
+        """Track ``frame`` (or finish it: ``extracted`` from ``Tracker.extract``, ``paused_s`` spent
+        since waiting for map updates) and send its pose, keyframe and acknowledgement."""
+        self._start_sched()
+        if extracted is not None:
+            res = self.tracker.track_extracted(extracted, paused_s)
         else:
-            res = self.tracker.track(frame)
+            res = self.tracker.track(frame, **self._fast_arguments(frame, handle))
         self.counts[res.status] = self.counts.get(res.status, 0) + 1
         self.n_tracked += 1
         for key, ms in res.timings.items():

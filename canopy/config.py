@@ -41,6 +41,10 @@ class RuntimeParams:
     map_update_lag_frames: int = 1
     # lockstep: frames the source may read (and enhancement process) ahead of tracking
     lockstep_prefetch_frames: int = 2
+    # lockstep: tracking extracts a frame's features (ORB, stereo matches: no map needed) before it
+    # waits for the map updates due at that frame, so the extraction overlaps local mapping's BA;
+    # the same trajectory bit for bit (docs/notes/s16-fps.md)
+    lockstep_extract_ahead: bool = True
     map_snapshot_period_s: float = 0.5
     # niceness of the source and enhancement actors (cheap feeders that read ahead in lockstep): on
     # two cores a feeder waking up should not take the core from tracking or local mapping; local

@@ -41,6 +41,12 @@ class TrackingParams:
     # 12.5 frames/s): the pool helps the worker when a core is free. Same results either way
     # (docs/notes/s10-speedfront.md); a quiet-machine bench_peers run decides.
     opencv_threads: int = 0
+    # Python's GIL hand-over interval in the tracking process (sys.setswitchinterval, ms; 0 keeps
+    # Python's 5 ms): the tracking thread and the stereo worker both run numpy / Python between
+    # their OpenCV calls, and a thread asking for the GIL waits up to the interval for the other to
+    # hand it over. Results are the same at any value (each thread's arithmetic is its own).
+    # docs/notes/s16-fps.md
+    switch_interval_ms: float = 0.0
     grid_cols: int = 16
     grid_rows: int = 8
     oversample: float = 1.6
@@ -350,6 +356,7 @@ class TrackingParams:
 
         need(self.n_features > 0, "n_features", "must be > 0")
         need(self.opencv_threads >= 0, "opencv_threads", "must be >= 0 (0: OpenCV's default)")
+        need(0 <= self.switch_interval_ms <= 100, "switch_interval_ms", "must be in [0, 100] (0: Python's default)")
         need(self.scale_factor > 1.0, "scale_factor", "must be > 1")
         need(1 <= self.n_levels <= 16, "n_levels", "must be in [1, 16]")
         need(0 < self.fast_threshold < 255, "fast_threshold", "must be in (0, 255)")

@@ -17,6 +17,8 @@ Where things are:
 * the keyframe policy (AGRI Eq. 6-7 and ORB-SLAM's conditions): ``canopy.frontend.keyframe_policy``;
 * trust in a pose, lost reasons, the noise-scaled FAST threshold: ``canopy.frontend.track_health``;
 * line features: ``canopy.frontend.tracker_lines.TrackerLinesMixin``;
+* map segments: (re)initialisation, the keyframe payload, frames without a trusted pose (predicted /
+  lost): ``canopy.frontend.tracker_segments.TrackerSegmentsMixin``;
 * far points as bearing-only measurements, the frustum test of the local-map search:
   ``canopy.frontend.tracker_measurements.TrackerMeasurementsMixin``.
 """
@@ -35,27 +37,26 @@ from canopy.frontend.keyframe_policy import entropy_ratio, keyframe_reasons
 from canopy.frontend.geometry import (differential_entropy, pose_information, se3_inv, stereo_pose_jacobian,
                                       transform)
 from canopy.frontend.map_tracking import MapTrackingMixin
-from canopy.frontend.map_view import MapView, seen_counts
+from canopy.frontend.map_view import MapView
 from canopy.frontend.tracker_map_view import TrackerMapViewMixin
 from canopy.frontend.matching import as_words
 from canopy.frontend.motion_check import ransac_or_prediction
-from canopy.frontend.messages import KeyframeData, TrackingResult
+from canopy.frontend.messages import TrackingResult
 from canopy.frontend.params import TrackingParams
 from canopy.frontend.stereo import StereoMatches
-from canopy.frontend.track_health import (LOST_TOO_FEW_MATCHES, LOST_TOO_FEW_STEREO, image_noise_sigma,
-                                          judge_pose)
+from canopy.frontend.track_health import LOST_TOO_FEW_MATCHES, image_noise_sigma, judge_pose
 from canopy.frontend.tracker_lines import TrackerLinesMixin
 from canopy.frontend.tracker_measurements import TrackerMeasurementsMixin
 from canopy.frontend.tracker_reloc import TrackerRelocalisationMixin
-from canopy.frontend.tracker_worker import StereoJob, TrackerFeaturesMixin, record_stage as _stage, stage_clock as _clock
-from shared.arrays import isin_ids, unique_sorted
+from canopy.frontend.tracker_segments import STATUS_LOST, STATUS_OK, TrackerSegmentsMixin
+from canopy.frontend.tracker_worker import (ExtractedFrame, StereoJob, TrackerFeaturesMixin, record_stage as _stage,
+                                           stage_clock as _clock)
+from shared.arrays import isin_ids
 from shared.types import StereoCalibration, StereoFrame
 
 if TYPE_CHECKING:
     from canopy.frontend.line_tracking import LineFrame
 
-STATUS_INIT, STATUS_OK, STATUS_LOST = "init", "ok", "lost"
-STATUS_PREDICTED = "predicted"  # no trusted pose: the motion model's, bridging a short gap (lost_reason says why)
 LINE_REJECT_REASONS = ("nan", "zero_length", "outside", "short")  # canopy.lines.detect_segments stats
 
 
@@ -63,7 +64,8 @@ def _ms(t0: float) -> float:
     return (time.perf_counter() - t0) * 1e3
 
 
-class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin, TrackerRelocalisationMixin):
+class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixin, MapTrackingMixin, TrackerLinesMixin,
+              TrackerRelocalisationMixin, TrackerSegmentsMixin):
     def __init__(self, calib: StereoCalibration, params: TrackingParams | None = None,
                  initial_pose: np.ndarray | None = None):
         self.calib = calib
@@ -170,6 +172,16 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
               fast_fallback: int | None = None, fast_min_keypoints: int = 0) -> TrackingResult:
         """Track one stereo frame. ``fast_threshold`` / ``fast_fallback`` override the
         FAST threshold (AFE Eq. 18 / Eq. 19 when too few of ``fast_min_keypoints``)."""
+        return self.track_extracted(self.extract(frame, fast_threshold, fast_fallback, fast_min_keypoints))
+
+    def extract(self, frame: StereoFrame, fast_threshold: int | None = None,
+                fast_fallback: int | None = None, fast_min_keypoints: int = 0) -> ExtractedFrame:
+        """The first half of ``track``: the frame's noise, its left ORB features (this thread) and
+        its stereo matches (with ``parallel_stereo`` a job left running on the worker). None of it
+        reads the local map, so a lockstep run may call this before applying the map updates due
+        at this frame (``apply_map_update``) and ``track_extracted`` after: the same result as
+        ``track`` with the updates applied first (the extraction overlaps local mapping's BA
+        instead of waiting for it; ``actors.tracking``)."""
         timings: dict[str, float] = {}
         t_all = t0 = _clock()
         self._stereo_last = self._stereo_raw = None
@@ -187,6 +199,14 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
         left, stereo, line_job = self._left_and_stereo(frame, (fast_threshold, fast_fallback, fast_min_keypoints),
                                                        noise_sigma, timings)
         self._contour_inputs = (frame.left, frame.right, left)  # for _stereo's contour test
+        return ExtractedFrame(frame, left, stereo, line_job, noise_sigma, timings, t_all)
+
+    def track_extracted(self, ex: ExtractedFrame, paused_s: float = 0.0) -> TrackingResult:
+        """The second half of ``track`` (the pose against the local map, the keyframe decision) for
+        the frame ``extract`` returned last. ``paused_s``: wall time spent between the two halves on
+        something else (waiting for a map update), left out of the ``total`` stage."""
+        frame, left, stereo, line_job, noise_sigma, timings = (ex.frame, ex.left, ex.stereo, ex.line_job,
+                                                               ex.noise_sigma, ex.timings)
         if not isinstance(stereo, StereoJob):
             stereo = self._stereo(stereo, timings)
         lines = None
@@ -211,7 +231,8 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
             self._finish_line_jobs(res.is_keyframe)
             timings.update(self._line_timings)
             self._line_timings.clear()
-        _stage(timings, "total", t_all)
+        _stage(timings, "total", ex.t_all)
+        timings["total"] -= paused_s * 1e3
         res.timings = timings
         return res
 
@@ -233,96 +254,6 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
         self._velocity = self._bridge_velocity.copy()
         res.keyframe_reason = "+".join(filter(None, [res.keyframe_reason, "relocalised"]))
         return res
-
-    # ------------------------------------------------------------------ (re)initialisation
-    def _initialise(self, frame: StereoFrame, feats: Features, stereo: StereoMatches, n_stereo: int,
-                    lines: LineFrame | None = None) -> TrackingResult:
-        T_wc = self._T_last.copy()  # first frame: initial pose; restart: last good pose
-        if n_stereo < self.params.min_init_points:
-            self.n_lost += 1
-            if self._initialised:
-                self._lost_streak += 1
-            return TrackingResult(frame.index, frame.timestamp, T_wc, STATUS_LOST, 0, 0, False, None,
-                                  self._ref_kf, lost_reason=LOST_TOO_FEW_STEREO)
-        restart = True
-        self._initialised = True
-        self._need_restart = False
-        self._lost_streak = 0
-        self._velocity = np.eye(4)
-        self._velocity_valid = False
-        self._n_failed = 0
-        # a new map segment: forget the old view (its landmarks are not connected to this one)
-        self._update_view.set(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 32), np.uint8))
-        self._provisional.clear()
-        self._segment_start_kf = frame.index
-        self._last_matched = (np.zeros((0, 3)), as_words(np.zeros((0, 32), np.uint8)), np.zeros(0, np.int64))
-        if self._lines_on:
-            self._line_update_view.set(np.zeros(0, np.int64), np.zeros((0, 2, 3)), np.zeros((0, 32), np.uint8))
-            self._line_provisional.clear()
-            self._line_view_dirty = True
-        matched_ids = np.full(len(feats), -1, np.int64)
-        line_matched = None if lines is None else np.full(len(lines), -1, np.int64)
-        kf = self._make_keyframe(frame, feats, stereo, T_wc, matched_ids, restart=restart, lines=lines,
-                                 line_matched=line_matched)
-        ids, pos, desc = self._provisional[frame.index]
-        self._last_matched = (pos, as_words(desc), ids)
-        self._after_frame(T_wc, feats, stereo)
-        return TrackingResult(frame.index, frame.timestamp, T_wc, STATUS_INIT, int((kf.new_landmark_ids >= 0).sum()),
-                              0, True, kf, frame.index, T_ref_cam=np.eye(4))
-
-    def _make_keyframe(self, frame, feats, stereo, T_wc, matched_ids, restart=False, lines=None,
-                       line_matched=None) -> KeyframeData:
-        """Build the keyframe payload; reserve ids for new close stereo landmarks."""
-        new_ids = np.full(len(feats), -1, np.int64)
-        create = self._landmark_candidates(stereo) & (matched_ids < 0)
-        idx = np.flatnonzero(create)
-        new_ids[idx] = self._next_landmark_id + np.arange(len(idx))
-        self._next_landmark_id += len(idx)
-        pos = self._stereo_points_world(feats, stereo, T_wc, idx)
-        self._record_viewing(new_ids[idx], pos, T_wc[:3, 3], feats.octave[idx])
-        self._provisional[frame.index] = (new_ids[idx], pos, feats.descriptors[idx])
-        self._view_dirty = True
-        uids, seen_visible, seen_found = seen_counts(self._seen)
-        self._seen = []
-        line_fields = {} if lines is None else self._keyframe_lines(frame, lines, line_matched, T_wc)
-        kf = KeyframeData(
-            index=frame.index, timestamp=frame.timestamp, T_world_cam=T_wc.copy(),
-            uv=feats.uv.astype(np.float32), u_right=self._keyframe_u_right(stereo),
-            depth=stereo.depth.astype(np.float32), descriptors=feats.descriptors.copy(),
-            octave=feats.octave.astype(np.int32), landmark_ids=matched_ids.copy(), new_landmark_ids=new_ids,
-            scale_factor=self.params.scale_factor, restart=restart,
-            seen_ids=uids, seen_visible=seen_visible, seen_found=seen_found, **line_fields)
-        self._remember_keyframe(kf)
-        self._ref_kf = frame.index
-        self._T_ref = T_wc.copy()
-        # sorted distinct ids by a sort: numpy's plain np.unique hashes, 20-50x slower here (shared.arrays)
-        self._ref_ids = unique_sorted(np.concatenate([matched_ids[matched_ids >= 0], new_ids[idx]]))
-        self._frames_since_kf = 0
-        self._entropy_first = None
-        self._ref_tracked_first = None
-        return kf
-
-    def _not_tracked(self, frame: StereoFrame, reason: str, n_inliers: int, n_matches: int) -> TrackingResult:
-        """A frame without a trusted pose. Within ``max_predicted_frames`` of the last tracked frame
-        the constant-velocity prediction bridges the gap (status "predicted", the map is kept);
-        after that the frame is lost and the next one restarts a map segment."""
-        self._n_failed += 1
-        if self._n_failed <= self.params.max_predicted_frames:
-            self.n_predicted += 1
-            self._T_last = self._T_last @ self._velocity
-            return TrackingResult(frame.index, frame.timestamp, self._T_last.copy(), STATUS_PREDICTED, n_inliers,
-                                  n_matches, False, None, self._ref_kf, T_ref_cam=se3_inv(self._T_ref) @ self._T_last,
-                                  lost_reason=reason)
-        self.n_lost += 1
-        self._need_restart = True
-        if self._lost_streak == 0:  # first lost frame: keep the motion for the relocalisation bridge
-            self._bridge_velocity = self._velocity.copy()
-            self._lost_streak = 1
-        self._velocity = np.eye(4)
-        self._velocity_valid = False
-        self._seen = []
-        return TrackingResult(frame.index, frame.timestamp, self._T_last.copy(), STATUS_LOST, n_inliers, n_matches,
-                              False, None, self._ref_kf, lost_reason=reason)
 
     def _after_frame(self, T_wc, feats: Features, stereo: StereoMatches) -> None:
         self._velocity = se3_inv(self._T_last) @ T_wc

@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import time
 from concurrent.futures import Executor, Future
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -35,6 +37,21 @@ def record_stage(timings: dict, name: str, t0: tuple[float, float]) -> None:
     """Record a stage's wall ms as ``name`` and its thread's CPU ms as ``name_cpu``."""
     timings[name] = (time.perf_counter() - t0[0]) * 1e3
     timings[name + "_cpu"] = (time.thread_time() - t0[1]) * 1e3
+
+
+@dataclass
+class ExtractedFrame:
+    """A frame between ``Tracker.extract`` and ``Tracker.track_extracted``: its left features, its
+    stereo matches (or the worker's pending ``StereoJob``), the left image's line job (None without
+    lines), the noise sigma the FAST floor used, the stage timings so far and the (wall, CPU) clock
+    at the start of ``extract``."""
+    frame: StereoFrame
+    left: Features
+    stereo: Any          # StereoMatches | StereoJob
+    line_job: Any        # Future | None
+    noise_sigma: float | None
+    timings: dict
+    t_all: tuple[float, float]
 
 
 def frame_stereo(left: Features, right: Features | None, frame: StereoFrame, calib: StereoCalibration,
