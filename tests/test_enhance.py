@@ -319,6 +319,10 @@ def _edge_images():
         "single": np.full((12, 17), 37, np.uint8),
         "1x1": np.full((1, 1), 200, np.uint8),
         "1x1_black": np.zeros((1, 1), np.uint8),
+        # 4x1 and 1x1: the shapes OpenCV's Python binding confuses with a cv::Scalar (4x1) when an
+        # array meets a Python number in cv2.add/divide (5.0 rejected 4x1, 5.1 returned 4x1 for 1x1)
+        "4x1": np.full((4, 1), 200, np.uint8),
+        "4x1_black": np.zeros((4, 1), np.uint8),
         "1xN": np.arange(0, 250, 10, dtype=np.uint8)[None, :],
         "Nx1": np.arange(0, 250, 10, dtype=np.uint8)[:, None],
         "ramp256": np.arange(256, dtype=np.uint8)[None, :],   # flat histogram: Eq. 3 is 0/0

@@ -91,7 +91,10 @@ def _dehaze(image: np.ndarray, params: EnhanceParams) -> np.ndarray:
     ratio = cv2.min(cv2.min(block_min[0] * np.float32(1.0 / a[0]), block_min[1] * np.float32(1.0 / a[1])),
                     block_min[2] * np.float32(1.0 / a[2]))
     t = np.clip(1.0 - np.float32(params.omega) * ratio, np.float32(params.t0), np.float32(1.0))
-    inv_t = cv2.divide(1.0, t)
+    # numpy, not cv2.divide(1.0, t): OpenCV's Python binding turns the scalar into a 4x1 Scalar and
+    # mistakes a 1x1 t for the scalar (5.1: a 4x1 result) or rejects a 4x1 t (5.0); t >= t0 > 0,
+    # the same float32 quotients, and faster than cv2.divide on 5.0
+    inv_t = np.float32(1.0) / t
     # Eq. 4 per channel: J = (Q - A)/t + A = Q·(1/t) + A·(1 - 1/t)
     channels = [cv2.add(cv2.multiply(c.astype(np.float32), inv_t), np.float32(a_c) * (1.0 - inv_t),
                         dtype=cv2.CV_8U)

@@ -113,8 +113,9 @@ def guided_self_filter(grey: np.ndarray, radius: int, eps: float, subsample: int
     mean_i = cv2.boxFilter(small, cv2.CV_32F, ksize)
     mean_ii = cv2.sqrBoxFilter(small, cv2.CV_32F, ksize)
     var_i = cv2.subtract(mean_ii, cv2.multiply(mean_i, mean_i))
-    # cv2 arithmetic: numpy's float32 division is several times slower here
-    a = cv2.divide(var_i, cv2.add(var_i, float(eps)))        # Eq. 5 with p = I
+    # cv2 division: numpy's float32 division is several times slower here. The + ε in numpy: cv2.add
+    # with a Python scalar is ambiguous on a 1x1 (OpenCV 5.1: 4x1 result) or 4x1 image (5.0: error)
+    a = cv2.divide(var_i, var_i + np.float32(eps))          # Eq. 5 with p = I
     b = cv2.subtract(mean_i, cv2.multiply(a, mean_i))         # Eq. 6
     mean_a = cv2.boxFilter(a, -1, ksize)
     mean_b = cv2.boxFilter(b, -1, ksize)
