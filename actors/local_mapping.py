@@ -4,7 +4,11 @@ A thin loop around ``canopy.backend.LocalMapper``, which owns the map
 (keyframes, landmarks, covisibility). Each update goes back to tracking;
 the supervisor gets a snapshot of keyframe poses and map points at most
 every ``snapshot_period_s`` and always at the end, so a crash elsewhere
-still leaves the map computed so far.
+still leaves the map computed so far. The rate cap never withholds the last
+change: a map changed since the last snapshot (a keyframe, a loop correction)
+is published once the period has passed even if nothing else arrives, and
+before a remote ``save_map`` is written, so a client that paused the run is
+shown (``map`` request, map deltas) exactly the map it then saves.
 
 With loop closing on, each inserted keyframe also goes to the loop closer;
 its answers are applied whenever they arrive (never waited for, so the loop
@@ -47,6 +51,7 @@ class LocalMappingActor(Actor):
                 restore_mapper(load_map(self.config["load_map"], self.config["calib"]), self.mapper)
         self.snapshot_period = float(self.config.get("snapshot_period_s", 0.5))
         self.last_snapshot = 0.0
+        self.map_changed = False  # since the last snapshot published (next_tick_s publishes it late)
         self.n_keyframes = 0
         self.loop_on = ctx.has_output("loop_closing")
         self.loop_wait_s = float(self.config.get("lockstep_wait_s", 60.0))
@@ -63,6 +68,8 @@ class LocalMappingActor(Actor):
     def on_control(self, msg, ctx: ActorContext) -> None:
         if isinstance(msg, SaveMapRequest):  # a remote client's save_map (actors.inspection)
             from canopy.loop.map_io import map_from_mapper, save_map
+            if self.map_changed:  # the stream shows the map about to be saved, and only that map
+                self._publish_snapshot(ctx, final=False)
             try:
                 save_map(msg.path, map_from_mapper(self.mapper, self.config.get("vocabulary_id", "")))
                 saved = MapSaved(path=msg.path, ok=True, keyframes=len(self.mapper.keyframes),
@@ -83,6 +90,7 @@ class LocalMappingActor(Actor):
                     msg.T_world_cam = rigid_pose(msg.T_world_cam)
             remap_landmarks(msg, self.landmark_alias)
             update = self.mapper.insert_keyframe(msg)
+            self.map_changed = True
             self.n_keyframes += 1
             self.last_update = update
             update.loop_epoch = self.loop_epoch
@@ -120,6 +128,7 @@ class LocalMappingActor(Actor):
             changed = apply_loop_result(self.mapper, result, update, self.landmark_alias)
         self.loops = max(self.loops, int(result.loops))
         if changed:
+            self.map_changed = True
             self.loop_epoch += 1
             self.epoch_corrections[self.loop_epoch] = corrections_from_arrays(result.keyframe_ids, result.corrections)
         return changed
@@ -137,8 +146,23 @@ class LocalMappingActor(Actor):
             elif isinstance(msg, EndOfStream):
                 return
 
+    def next_tick_s(self) -> float | None:
+        """A changed map not yet published: when its snapshot is due (the rate cap's trailing edge).
+        Without it the last keyframes before a pause (or the run's idle end) stayed unpublished
+        until the next keyframe: a paused client's ``map`` request and its map deltas showed an
+        older map than the one ``save_map`` wrote (a keyframe every 3 frames on EuRoC lands a
+        second keyframe within the period)."""
+        if not self.map_changed:
+            return None
+        return self.last_snapshot + self.snapshot_period - time.monotonic()
+
+    def on_tick(self, ctx: ActorContext) -> float | None:
+        self._publish_snapshot(ctx, final=False)
+        return None  # not a message: local mapping's service times stay per keyframe
+
     def _snapshot(self, final: bool) -> MapSnapshot:
         self.last_snapshot = time.monotonic()
+        self.map_changed = False
         kfs = self.mapper.keyframe_trajectory()
         return MapSnapshot(keyframe_indices=np.asarray(kfs.meta["indices"], np.int64), keyframe_stamps=kfs.stamps,
                            keyframe_poses=kfs.poses,
