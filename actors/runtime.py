@@ -226,8 +226,9 @@ def actor_main(spec: ActorSpec) -> None:
     current_index = -1
     try:
         ctx = ActorContext(spec, zctx)
-        if int(spec.config.get("niceness", 0)) > 0:  # a lower CPU priority (runtime.feeder_niceness)
+        if int(spec.config.get("niceness", 0)) > 0:  # a lower CPU priority (runtime.*_niceness)
             os.nice(int(spec.config["niceness"]))
+        ctx.extra["niceness"] = os.nice(0)  # as the process runs (stats.json), whatever set it
         actor = _load_factory(spec.factory)(spec.config, seed=spec.seed)
         actor.name = spec.name
         actor.setup(ctx)

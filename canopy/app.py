@@ -102,6 +102,7 @@ def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_fra
              {"calib": calib, "params": cfg.mapping, "snapshot_period_s": rt.map_snapshot_period_s,
               "lockstep_wait_s": rt.lockstep_wait_s, "save_map": save_map, "load_map": load_map,
               "sensor": rt.sensor, "mono": cfg.mono, "pixel_sigma": cfg.tracking.pixel_sigma,
+              "niceness": rt.mapping_niceness,
               "vocabulary_id": Path(cfg.loop.vocabulary).name if loop_on and cfg.loop.vocabulary else
               ("default" if loop_on else "")},
              ["tracking", *to_recorder, *to_loop]),

@@ -53,6 +53,9 @@ class RuntimeParams:
     # EuRoC 37.4 -> 32.1 ms, KITTI 80.1 -> 76.4 ms, same trajectories; the feeders read two frames
     # ahead, so a later wake-up costs nothing in lockstep
     feeder_niceness: int = 15
+    # niceness of local mapping (0: as tracking). configs/euroc.yaml: 5, where its per-frame BA cost made
+    # tracking wait for a core; lockstep results do not depend on it (map updates land at fixed frames)
+    mapping_niceness: int = 0
     seed: int = 0
     sensor: str = "stereo"           # stereo | mono (the left image only; canopy.mono)
 
@@ -82,6 +85,8 @@ class RuntimeParams:
                               f"second), got {self.heartbeat_timeout_s}")
         if not 0 <= self.feeder_niceness <= 19:
             raise ConfigError("runtime.feeder_niceness", f"must be 0..19, got {self.feeder_niceness}")
+        if not 0 <= self.mapping_niceness <= 19:
+            raise ConfigError("runtime.mapping_niceness", f"must be 0..19, got {self.mapping_niceness}")
         if not 0 <= self.grace_s < float("inf"):
             raise ConfigError("runtime.grace_s", f"must be a finite number >= 0, got {self.grace_s}")
 
