@@ -92,18 +92,24 @@ def _first_keyframe(frame, params, calib):
     return tracker, res.keyframe
 
 
+def _hazy_kitti_pair(index: int, rng_left: int):
+    """(source, clean KITTI 06 frame, the same pair with the grid's haze beta 0.06 from SGBM depth and the
+    noisy sensor; noise seeds rng_left / rng_left + 1)."""
+    src = open_source("kitti", KITTI)
+    f = src.frame(index)
+    ray = ray_length(depth_from_stereo(f.left, f.right, src.calibration), src.calibration)
+    cell = DegradeParams(mode="haze+noise", beta=0.06, full_well=NOISE_LEVELS["high"][0],
+                         read_noise=NOISE_LEVELS["high"][1])
+    return src, f, StereoFrame(f.index, f.timestamp, degrade_image(f.left, cell, ray, rng=rng_left),
+                               degrade_image(f.right, cell, ray, rng=rng_left + 1))
+
+
 def test_uncertain_stereo_points_create_no_landmarks_and_the_rest_is_unchanged():
     """KITTI 06 frame 10 with the grid's haze (β 0.06) and noisy sensor: the rule leaves the stereo
     matches as they are, withholds landmarks from the points whose relative disparity bound is over the
     threshold (and only those), and those points' disparities are worse against the clean pair's SGBM
     than the kept ones'. Off, or on a clean pair (under the noise gate), the keyframe is the default's."""
-    src = open_source("kitti", KITTI)
-    f = src.frame(10)
-    ray = ray_length(depth_from_stereo(f.left, f.right, src.calibration), src.calibration)
-    cell = DegradeParams(mode="haze+noise", beta=0.06, full_well=NOISE_LEVELS["high"][0],
-                         read_noise=NOISE_LEVELS["high"][1])
-    hazy = StereoFrame(f.index, f.timestamp, degrade_image(f.left, cell, ray, rng=0),
-                       degrade_image(f.right, cell, ray, rng=1))
+    src, f, hazy = _hazy_kitti_pair(10, rng_left=0)
     base = replace(load_run_config("kitti").tracking, parallel_extraction=False, uncertain_stereo_max_rel_sigma=0.0)
     rule = replace(base, uncertain_stereo_max_rel_sigma=0.05)  # the defaults: landmarks withheld, not bearing-only
     _, kf0 = _first_keyframe(hazy, base, src.calibration)
@@ -133,13 +139,7 @@ def test_uncertain_stereo_points_create_no_landmarks_and_the_rest_is_unchanged()
 
 
 def test_bearing_only_switch_drops_the_right_column_of_exactly_the_uncertain_points():
-    src = open_source("kitti", KITTI)
-    f = src.frame(20)
-    ray = ray_length(depth_from_stereo(f.left, f.right, src.calibration), src.calibration)
-    cell = DegradeParams(mode="haze+noise", beta=0.06, full_well=NOISE_LEVELS["high"][0],
-                         read_noise=NOISE_LEVELS["high"][1])
-    hazy = StereoFrame(f.index, f.timestamp, degrade_image(f.left, cell, ray, rng=2),
-                       degrade_image(f.right, cell, ray, rng=3))
+    src, f, hazy = _hazy_kitti_pair(20, rng_left=2)
     base = replace(load_run_config("kitti").tracking, parallel_extraction=False, uncertain_stereo_max_rel_sigma=0.0)
     _, kf0 = _first_keyframe(hazy, base, src.calibration)
     tracker, kf1 = _first_keyframe(hazy, replace(base, uncertain_stereo_max_rel_sigma=0.05, uncertain_stereo_bearing_only=True,
