@@ -33,10 +33,9 @@ class TrackerMeasurementsMixin:
 
     def _landmark_candidates(self, stereo: StereoMatches) -> np.ndarray:
         ok = stereo.valid if self.params.contour_landmarks else self._surface_stereo(stereo)
-        if not self.params.uncertain_stereo_landmarks:
-            uncertain = getattr(self, "_uncertain", None)
-            if uncertain is not None and uncertain[0] is stereo and uncertain[1] is not None:
-                ok = ok & ~uncertain[1]
+        uncertain = self._uncertain_mask(stereo)
+        if uncertain is not None and not self.params.uncertain_stereo_landmarks:
+            ok = ok & ~uncertain
         return ok & (stereo.depth < self._max_depth)
 
     def _close(self, stereo: StereoMatches) -> np.ndarray:
@@ -64,6 +63,12 @@ class TrackerMeasurementsMixin:
             self._uncertain = (stereo, self._uncertain_stereo(stereo))
             self._stereo_last, self._stereo_obs = stereo, self._bearing_only_far(stereo)
         return self._stereo_last
+
+    def _uncertain_mask(self, stereo: StereoMatches) -> np.ndarray | None:
+        """The uncertain-disparity flags computed for exactly these stereo matches (None: none computed,
+        the option off, or the frame under the noise gate)."""
+        flagged = getattr(self, "_uncertain", None)  # set per frame in _stereo
+        return flagged[1] if flagged is not None and flagged[0] is stereo else None
 
     def _uncertain_stereo(self, stereo: StereoMatches) -> np.ndarray | None:
         """Stereo points whose relative Cramér-Rao disparity sigma is at least
@@ -125,10 +130,9 @@ class TrackerMeasurementsMixin:
         mono = stereo.valid & (stereo.depth >= self._stereo_obs_depth)
         if stereo.on_contour is not None:
             mono |= stereo.on_contour
-        uncertain = getattr(self, "_uncertain", None)
-        if uncertain is not None and uncertain[0] is stereo and uncertain[1] is not None \
-                and self.params.uncertain_stereo_bearing_only:
-            mono |= uncertain[1]  # disparity the image cannot pin (_uncertain_stereo)
+        uncertain = self._uncertain_mask(stereo)
+        if uncertain is not None and self.params.uncertain_stereo_bearing_only:
+            mono |= uncertain  # disparity the image cannot pin (_uncertain_stereo)
         return mono
 
     def _bearing_only_far(self, stereo: StereoMatches) -> StereoMatches:
