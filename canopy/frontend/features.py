@@ -8,11 +8,14 @@ strongest), so tracking keeps constraints all over the image.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from operator import attrgetter
 
 import cv2
 import numpy as np
 
 from canopy.frontend.params import TrackingParams
+
+_OCTAVE, _RESPONSE = attrgetter("octave"), attrgetter("response")
 
 
 @dataclass
@@ -112,9 +115,9 @@ class OrbExtractor:
         if desc is None or len(kps) == 0:
             return Features.empty()
         uv = cv2.KeyPoint_convert(kps).astype(np.float32).reshape(-1, 2)
-        # one generator per field straight into its dtype (2.5x faster than a list of tuples)
-        octave = np.fromiter((k.octave for k in kps), np.int32, len(kps))
-        response = np.fromiter((k.response for k in kps), np.float32, len(kps))
+        # one attribute getter per field straight into its dtype (no Python frame per keypoint)
+        octave = np.fromiter(map(_OCTAVE, kps), np.int32, len(kps))
+        response = np.fromiter(map(_RESPONSE, kps), np.float32, len(kps))
         h, w = image.shape[:2]
         keep = grid_select(uv, response, w, h, self.params.n_features,
                            self.params.grid_cols, self.params.grid_rows)
