@@ -344,6 +344,9 @@ class TrackingParams:
     uncertain_stereo_min_noise: float = 4.0
     uncertain_stereo_bearing_only: bool = False
     uncertain_stereo_landmarks: bool = False
+    # ... the bound with the noise as the octave's resampled window carries it (4/9 of white at octaves
+    # >= 1; keypoint_uncertainty.sampled_noise_factors, docs/notes/s17-kittihaze.md). False: white.
+    uncertain_stereo_sampled_noise: bool = False
 
     def disparity_offset_for(self, extractor: str) -> float:
         """The calibrated disparity offset for keypoints found by ``extractor`` (Features.extractor)."""

@@ -88,7 +88,8 @@ class TrackerMeasurementsMixin:
         out = np.zeros(len(stereo.depth), bool)
         if len(idx):
             uv = feats.uv[idx].astype(np.float32)
-            sd = disparity_sigma(left_img, uv, feats.octave[idx], self.scale_factors, noise, p.subpixel_window)
+            sd = disparity_sigma(left_img, uv, feats.octave[idx], self.scale_factors, noise, p.subpixel_window,
+                                 p.uncertain_stereo_sampled_noise)
             disp = self.calib.bf / stereo.depth[idx].astype(np.float64)
             out[idx] = sd >= p.uncertain_stereo_max_rel_sigma * disp
         return out
