@@ -103,6 +103,9 @@ def main() -> int:
     ap.add_argument("--set", action="append", default=[])
     ap.add_argument("--tol", type=float, default=3.0, help="px (x octave scale) for a true correspondence")
     ap.add_argument("--out", default=None)
+    ap.add_argument("--auto-enhance", action="store_true",
+                    help="each image through canopy.enhance.auto.auto_treat first (per image, not the pipeline's "
+                         "pair treatment; for the dark clean presets, whose frames auto enhances)")
     ap.add_argument("--oracle-stereo", action="store_true",
                     help="diagnosis: every stereo depth replaced by the exact (foreground) depth at its keypoint")
     ap.add_argument("--oracle-velocity", action="store_true",
@@ -125,6 +128,21 @@ def main() -> int:
         pass
 
     dd.Tracker = Hooked
+    orig_open = dd.open_source
+    if args.auto_enhance:
+        import dataclasses
+
+        from canopy.enhance.auto import auto_treat
+        from canopy.enhance.params import EnhanceParams
+        ep = EnhanceParams()
+
+        def open_enhanced(*a, **k):
+            src = orig_open(*a, **k)
+            raw = src.frame
+            src.frame = lambda i: dataclasses.replace(raw(i), left=auto_treat(raw(i).left, ep)[0],
+                                                      right=auto_treat(raw(i).right, ep)[0])
+            return src
+        dd.open_source = open_enhanced
     if args.oracle_stereo:
         fg_cache = {}
 
@@ -156,6 +174,7 @@ def main() -> int:
     Hooked.track = track_hook
     d = dd.run("synthetic", args.path, args.max_frames, args.set)
     dd.Tracker = orig_tracker
+    dd.open_source = orig_open
     tr = holder["tracker"]
     gt = d["gt"]
     calib = tr.calib
