@@ -16,7 +16,14 @@ Against the generator's ground truth (``mav0/depth0``, exact depth of cam0; the 
 Counterfactual poses on the same matches (``refine_pose`` from the true pose, the tracker's settings), each
 compared with the true pose (translation error, mm): ``est`` the tracker's; ``true_X`` the map points replaced
 by their physical points; ``true_corr`` only true correspondences; ``mono`` no u_right terms;
-``true_X_mono`` both. Which replacement removes the error says where it comes from.
+``true_X_mono`` both; ``surface`` / ``true_X_surface`` only landmarks created off occluding contours (their
+5x5 exact depth within 5 %; nan when fewer than 6). Which replacement removes the error says where it
+comes from. A contour keypoint has no fixed physical point (the contour slides over the surface as the
+view changes): its "physical point" is the foreground surface point its creating keypoint saw.
+
+``--oracle-velocity`` / ``--oracle-stereo`` replace the constant-velocity prediction / every stereo depth
+with the truth (diagnoses, not methods); ``--auto-enhance`` runs each image through ``auto_treat`` first
+(the dark clean presets). docs/notes/s17-darkrows.md has the dark-rows g1-b0.06-high figures.
 
     PYTHONPATH=$PWD CANOPY_CACHE_DIR=/work/cache python benchmarks/diagnose_correspondences.py \
         --path /work/cache/degraded/dark-rows-400-g1-b0.06-high-seed0-rendered --max-frames 150 --out /tmp/c.npz
@@ -215,7 +222,8 @@ def main() -> int:
 
     p = tr.params
     sigma_of = lambda octv: p.pixel_sigma * tr.scale_factors[octv]  # noqa: E731
-    hdr = ("frame  inl surf surfcur true%  |Xerr|p50mm  Xdepth%p50  stereo%p50(cur)  step_est/true  terr_mm: est true_X "
+    hdr = ("frame  inl surf surfcur true%  |Xerr|p50mm  Xdepth%p50  stereo%p50(cur)  step_est/true  "
+           "terr_mm: est true_X "
            "true_corr mono true_X_mono surface true_X_surface")
     print(hdr)
     for i in range(1, len(gt)):
@@ -296,7 +304,8 @@ def main() -> int:
                          cur_rel[j], has_r[j], z_created_true[j], zt_cur[j], uv[j, 0], uv[j, 1], surf_created[j],
                          surf_cur[j], z_created_stereo[j], uv[j, 0] - proj_true[j, 0], uv[j, 1] - proj_true[j, 1]))
         if len(frame_rows) <= args.print_frames or i % 10 == 0:
-            print(f"{i:5d} {fr['n_inl']:4d} {fr['n_surf']:4d} {fr['n_surf_cur']:4d} {100 * fr['true_frac']:5.0f}  {fr['xerr_p50']:9.0f}  "
+            print(f"{i:5d} {fr['n_inl']:4d} {fr['n_surf']:4d} {fr['n_surf_cur']:4d} "
+                  f"{100 * fr['true_frac']:5.0f}  {fr['xerr_p50']:9.0f}  "
                   f"{100 * fr['depth_rel_p50']:+8.1f}  {100 * fr['cur_rel_p50']:+8.1f}  "
                   f"{fr['step_ratio']:6.2f} ({1e3 * step_true:4.1f}mm)  "
                   f"{cf['est']:6.1f} {cf['true_X']:6.1f} {cf['true_corr']:6.1f} {cf['mono']:6.1f} "
