@@ -103,6 +103,54 @@ class RecordingTracker(Tracker):
         return res
 
 
+def edge_normals(image: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per keypoint: the unit normal of the local edge (the structure tensor's dominant eigenvector,
+    gradients at sigma 1, window sigma 3) and the eigenvalue ratio lambda_min / lambda_max (0: a straight
+    edge, 1: a blob or a corner)."""
+    img = cv2.GaussianBlur(image.astype(np.float32), (0, 0), 1.0)
+    gx = cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=3)
+    gy = cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=3)
+    jxx, jxy, jyy = (cv2.GaussianBlur(a, (0, 0), 3.0) for a in (gx * gx, gx * gy, gy * gy))
+    h, w = img.shape
+    x = np.clip(np.round(uv[:, 0]).astype(int), 0, w - 1)
+    y = np.clip(np.round(uv[:, 1]).astype(int), 0, h - 1)
+    a, b, c = jxx[y, x].astype(float), jxy[y, x].astype(float), jyy[y, x].astype(float)
+    tr, det = a + c, a * c - b * b
+    disc = np.sqrt(np.maximum(tr * tr / 4 - det, 0.0))
+    l1, l2 = tr / 2 + disc, tr / 2 - disc
+    theta = 0.5 * np.arctan2(2 * b, a - c)  # the dominant eigenvector's angle
+    return np.stack([np.cos(theta), np.sin(theta)], axis=1), l2 / np.maximum(l1, 1e-12)
+
+
+def refine_anisotropic(T_cw, X, uv, sigma, normals, ratio, calib, along_factor, edge_ratio=0.2, iterations=10):
+    """Monocular Gauss-Newton on (u, v) residuals whose sigma along an edge-like keypoint's edge
+    (eigenvalue ratio < ``edge_ratio``) is ``along_factor`` x its sigma across it (a diagnosis of how much
+    the contour keypoints' sliding costs: along_factor 1 = isotropic)."""
+    from canopy.frontend.geometry import se3_exp, stereo_pose_jacobian
+    n_ = normals
+    t_ = np.stack([-n_[:, 1], n_[:, 0]], axis=1)
+    s_t = np.where(ratio < edge_ratio, along_factor, 1.0) * sigma
+    # W = n n^T / s^2 + t t^T / s_t^2 per point
+    W = (n_[:, :, None] * n_[:, None, :]) / (sigma ** 2)[:, None, None] + \
+        (t_[:, :, None] * t_[:, None, :]) / (s_t ** 2)[:, None, None]
+    T = T_cw.copy()
+    for _ in range(iterations):
+        pred, Pc = project_stereo(T, X, calib)
+        r = uv - pred[:, :2]
+        J = stereo_pose_jacobian(Pc, calib)[:, :2, :]
+        JW = np.einsum("nki,nkl->nil", J, W)
+        H = np.einsum("nil,nlj->ij", JW, J)
+        g = np.einsum("nil,nl->i", JW, r)
+        try:
+            dx = np.linalg.solve(H, g)
+        except np.linalg.LinAlgError:
+            break
+        T = se3_exp(dx) @ T
+        if np.linalg.norm(dx) < 1e-7:
+            break
+    return T
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--path", required=True)
@@ -110,6 +158,9 @@ def main() -> int:
     ap.add_argument("--set", action="append", default=[])
     ap.add_argument("--tol", type=float, default=3.0, help="px (x octave scale) for a true correspondence")
     ap.add_argument("--out", default=None)
+    ap.add_argument("--along-factor", type=float, default=0.0,
+                    help="diagnosis: also solve each frame's pose (monocular) with an edge keypoint's sigma along "
+                         "its edge this many times its sigma across (and isotropically, for comparison)")
     ap.add_argument("--auto-enhance", action="store_true",
                     help="each image through canopy.enhance.auto.auto_treat first (per image, not the pipeline's "
                          "pair treatment; for the dark clean presets, whose frames auto enhances)")
@@ -165,6 +216,8 @@ def main() -> int:
     holder = {}
 
     gt_all = None
+    from canopy.sources import open_source as _open
+    images = _open("euroc", args.path, max_frames=args.max_frames) if args.along_factor > 0 else None
     if args.oracle_velocity:
         from canopy.sources import open_source
         gt_all = open_source("euroc", args.path, max_frames=args.max_frames).ground_truth.poses
@@ -289,6 +342,17 @@ def main() -> int:
         cf["true_X_surface"] = terr(solve(Xtrue, su & known, yes)) if (su & known).sum() >= 6 else np.nan
         cf["mono"] = terr(solve(X, used, ~yes)) if used.sum() >= 6 else np.nan
         cf["true_X_mono"] = terr(solve(Xtrue, kn, ~yes)) if kn.sum() >= 6 else np.nan
+        if images is not None:
+            normals, ratio = edge_normals(images.frame(i).left, uv)
+            sg = sigma_of(octv)
+            for name, Xs, sel in (("iso", X, used), ("true_X_iso", Xtrue, used & known)):
+                af = 1.0
+                cf[name] = terr(refine_anisotropic(T_true_cw, Xs[sel], uv[sel], sg[sel], normals[sel], ratio[sel],
+                                                   calib, af)) if sel.sum() >= 6 else np.nan
+                cf[name.replace("iso", "aniso")] = terr(refine_anisotropic(
+                    T_true_cw, Xs[sel], uv[sel], sg[sel], normals[sel], ratio[sel], calib,
+                    args.along_factor)) if sel.sum() >= 6 else np.nan
+            cf["edge_share"] = float((ratio[used] < 0.2).mean())
         ui = used
         fr = dict(frame=i, n_inl=int(ui.sum()), n_known=int((ui & known).sum()),
                   true_frac=float(true_corr[ui & known].mean()) if (ui & known).any() else np.nan,
