@@ -38,6 +38,7 @@ import numpy as np
 from canopy.enhance.noise import denoise, estimate_noise
 from canopy.frontend.cell_extractor import CellExtractor, make_extractor
 from canopy.frontend.features import OrbExtractor
+from canopy.frontend.level_noise_extractor import LevelNoiseCellExtractor
 from canopy.frontend.params import TrackingParams
 from canopy.frontend.track_health import image_noise_sigma
 
@@ -146,7 +147,8 @@ class NoiseGatedExtractor:
         self.params = params
         self.opencv = OrbExtractor(params)
         n = params.noisy_extractor_n_features or params.n_features
-        self.cells = CellExtractor(replace(params, extractor="cells", n_features=n), responses)
+        cells = LevelNoiseCellExtractor if params.noisy_extractor_level_noise else CellExtractor
+        self.cells = cells(replace(params, extractor="cells", n_features=n), responses)
         self.last_used = ""
         self.last_robust_sigma: float | None = None
 

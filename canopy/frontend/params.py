@@ -323,6 +323,9 @@ class TrackingParams:
     # row) get the per-cell extractor; noisy, textured ones keep cv2.ORB. 0: no texture test.
     noisy_extractor_robust: bool = False
     noisy_extractor_max_texture: float = 0.0
+    # s17-darkrows: NoiseGatedExtractor's per-cell extraction with each coarser pyramid level's FAST
+    # thresholds from that level's own noise sigma (canopy.frontend.level_noise_extractor). False: off.
+    noisy_extractor_level_noise: bool = False
     # Stereo fill-in (canopy.frontend.stereo_fill): the left keypoints the descriptor matcher leaves
     # unmatched get a right column by LK flow (the right image's FAST misses half the far,
     # low-contrast corners of a hazy frame) on frames whose robust noise sigma is in
