@@ -27,7 +27,6 @@ from typing import Any, Callable
 
 from pathlib import Path
 
-import msgpack
 import psutil
 import zmq
 

@@ -24,7 +24,7 @@ from actors.schedstat import thread_report, thread_schedstat
 from canopy.enhance import tracking_fast_arguments
 from canopy.frontend import Tracker
 from canopy.pipeline import MapUpdateSchedule, effective_map_update_lag
-from protocol.messages import EndOfStream, FrameDone, FrameHandle, FramePose, KeyframeData, LocalMapUpdate
+from protocol.messages import EndOfStream, FrameDone, FrameHandle, FramePose, LocalMapUpdate
 from shared.errors import CanopyError
 from shared.ring import FrameRing, SlotOverwritten
 from shared.types import StereoFrame

@@ -11,7 +11,6 @@ CPU and peak RSS, dropped frames, ATE. Writes everything to JSON.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import sys

@@ -9,7 +9,6 @@ the bundle-adjusted keyframe poses.
 """
 from __future__ import annotations
 
-import time
 from collections import deque
 from dataclasses import dataclass, field
 

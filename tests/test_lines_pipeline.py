@@ -138,7 +138,6 @@ def test_temporal_line_matching_finds_projected_map_lines():
 # ------------------------------------------------------------------ BA line factors
 @pytest.mark.parametrize("right", [False, True])
 def test_custom_line_factor_jacobians_match_central_differences(right):
-    rng = np.random.default_rng(4)
     T_wc = se3_inv(se3_exp(np.array([0.05, -0.02, 0.03, 0.2, -0.1, 0.3])))
     A = transform(T_wc, np.array([[-0.5, -0.8, 5.0]]))[0]
     B = transform(T_wc, np.array([[0.3, 0.9, 6.0]]))[0]

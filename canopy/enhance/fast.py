@@ -10,7 +10,6 @@ differences; θ = 0 would make every pixel a corner candidate).
 """
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
 from canopy.enhance.agcwd import intensity_lambda

@@ -251,7 +251,6 @@ def grid_pairs_grouped(q_uv: np.ndarray, r_uv: np.ndarray, r_group: np.ndarray,
     range; the pairs, and their order (by query, then key, then reference index), are those of
     the binary search."""
     cells, lo_uv, n_cols, sizes, offset, rkey = _grouped_grid(q_uv, r_uv, r_group, cells)
-    n_groups = len(cells)
     order = np.argsort(rkey, kind="stable")
     start = np.zeros(int(sizes.sum()) + 1, np.int64)   # start[k]: references with a key < k
     np.cumsum(np.bincount(rkey, minlength=len(start) - 1), out=start[1:])

@@ -37,7 +37,7 @@ def new_points_between(a, b, calib: StereoCalibration, params: MonoParams, scale
     ``landmark``. Returns (keypoints of a, keypoints of b, world points (K,3))."""
     empty = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)))
     Kinv = np.linalg.inv(calib.K)
-    Ta, Tb = se3_inv(a.T_world_cam), se3_inv(b.T_world_cam)
+    Tb = se3_inv(b.T_world_cam)
     ia = np.flatnonzero(a.landmark < 0)
     ib = np.flatnonzero(b.landmark < 0)
     if len(ia) == 0 or len(ib) == 0:

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from shared.errors import InputError, warn_input
+from shared.errors import InputError
 from shared.types import StereoCalibration, Trajectory
 
 from .base import (

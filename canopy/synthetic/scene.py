@@ -146,7 +146,7 @@ class OrchardScene:
         self.layout = layout
         self.low_texture_x = tuple(low_texture_x)
         rng = np.random.default_rng([seed, 0x5CE])
-        L, rs = layout.row_length, layout.row_spacing
+        L = layout.row_length
         xs, ys = [], []
         n_per_row = int(np.floor(L / layout.tree_spacing)) + 1
         for j in range(layout.n_rows):
