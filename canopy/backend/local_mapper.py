@@ -48,6 +48,28 @@ def _ms(t0: float) -> float:
     return (time.perf_counter() - t0) * 1e3
 
 
+def distinctive_index(desc: np.ndarray) -> np.ndarray:
+    """Per group of ``n`` descriptors (G, n, 32): the index of the one with the least median Hamming
+    distance to the group's descriptors (ORB-SLAM's ComputeDistinctiveDescriptors; the first on ties,
+    as ``np.argmin(np.median(D, axis=2), axis=1)``). The same indices, ~2-4x cheaper on EuRoC's
+    ~20-observation landmarks: the distance matrix summed word by word in uint16 (the (G,n,n,4)
+    popcounts summed over their short last axis were ~half the cost) and the median ranked by the
+    middle element (odd n) or the sum of the two middle ones (even n: twice the median, exact in
+    integers) from one ``np.partition``, with no float medians."""
+    G, n = desc.shape[:2]
+    w = np.ascontiguousarray(as_words(desc.reshape(-1, 32)).reshape(G, n, 4).transpose(2, 0, 1))  # (4,G,n)
+    D = np.zeros((G, n, n), np.uint16)
+    for k in range(4):
+        D += _popcount64(w[k][:, :, None] ^ w[k][:, None, :])
+    h = n // 2
+    if n % 2:
+        key = np.partition(D, h, axis=2)[:, :, h]
+    else:
+        P = np.partition(D, (h - 1, h), axis=2)
+        key = P[:, :, h - 1].astype(np.int32) + P[:, :, h]
+    return np.argmin(key, axis=1)
+
+
 class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
     def __init__(self, calib: StereoCalibration, params: MappingParams | None = None):
         self.calib = calib
@@ -263,9 +285,7 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
             rows = row_of_kf[np.fromiter(chain.from_iterable(obs), np.int64, len(group) * n)] + \
                 np.fromiter(chain.from_iterable(map(dict.values, obs)), np.int64, len(group) * n)
             desc = table[rows].reshape(len(group), n, 32)
-            w = as_words(desc.reshape(-1, 32)).reshape(len(group), n, 4)
-            D = _popcount64(w[:, :, None, :] ^ w[:, None, :, :]).sum(-1)      # (G,n,n)
-            best = np.argmin(np.median(D, axis=2), axis=1)
+            best = distinctive_index(desc)
             chosen = desc[np.arange(len(group)), best]
             rows = self.landmarks.rows
             if rows is not None:   # one scatter into the store's descriptor rows
