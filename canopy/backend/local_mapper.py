@@ -93,6 +93,9 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         # keyframes removed by mapping.keyframe_culling: index -> (parent, T_parent_k, timestamp) (canopy.backend.keyframe_culling)
         self.culled_keyframes: dict[int, tuple[int, np.ndarray, float]] = {}
         self.n_keyframes_culled = 0
+        # keyframes at either end of a closed loop: never culled (ORB-SLAM's SetNotErase on the loop's
+        # two keyframes, LoopClosing::ComputeSim3 / KeyFrame::AddLoopEdge)
+        self.loop_keyframes: set[int] = set()
 
     # ----------------------------------------------------------------- public API
     def insert_keyframe(self, kf: KeyframeData) -> LocalMapUpdate:
@@ -139,6 +142,10 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         update.timings = timings
         self.timings.append(timings)
         return update
+
+    def keep_loop_edge(self, a: int, b: int) -> None:
+        """Keyframes ``a`` and ``b`` carry a loop edge: keyframe culling leaves them in the map."""
+        self.loop_keyframes.update((int(a), int(b)))
 
     def map_lines(self) -> np.ndarray:
         """(L,2,3) endpoints A, B (world) of every line landmark, in id order."""
