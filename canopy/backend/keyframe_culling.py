@@ -64,11 +64,11 @@ def cull_keyframe(mapper, k: int) -> int:
     most landmarks with (``mapper.culled_keyframes[k] = (parent, T_parent_k, timestamp)``). Returns the parent."""
     rec = mapper.keyframes[k]
     lids = rec.landmark[rec.landmark >= 0].tolist()
-    shared = Counter()
-    for lid in lids:
-        lm = mapper.landmarks.get(lid)
-        if lm is not None:
-            shared.update(kk for kk in lm.obs if kk != k)
+    # the other observers of its landmarks counted at C level (a generator per landmark cost ~5 ms per
+    # culled EuRoC keyframe, ~600 landmarks x ~20 observers); k's own count is dropped after
+    get = mapper.landmarks.get
+    shared = Counter(chain.from_iterable(lm.obs for lm in map(get, lids) if lm is not None))
+    shared.pop(k, None)
     same = [kk for kk in shared if mapper.keyframes[kk].segment == rec.segment]
     if same:
         parent = max(same, key=lambda kk: (shared[kk], kk))

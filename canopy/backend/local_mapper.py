@@ -16,7 +16,6 @@ Where things are:
 from __future__ import annotations
 
 import time
-from collections import Counter
 from itertools import chain
 from operator import attrgetter
 
@@ -303,10 +302,16 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
 
     # ----------------------------------------------------------------- covisibility window
     def _covisible(self, rec: Keyframe) -> dict[int, int]:
-        # the observing keyframes of all of rec's landmarks chained and counted at C level (Counter)
-        # (map over the store's __getitem__: no Python frame per landmark)
-        counts = Counter(chain.from_iterable(map(_OBS, map(self.landmarks.__getitem__,
-                                                           rec.landmark[rec.landmark >= 0].tolist()))))
+        """Keyframe index -> landmarks it shares with ``rec`` (every reader orders the keyframes by
+        (count, index), so the dict's order is free: ascending here)."""
+        # the observing keyframes of all of rec's landmarks chained at C level into one array and counted
+        # by np.bincount (map over the store's __getitem__: no Python frame per landmark; a Counter over
+        # the chain cost ~0.9 ms per EuRoC keyframe with ~20 observers per landmark, this ~0.55)
+        obs = list(map(_OBS, map(self.landmarks.__getitem__, rec.landmark[rec.landmark >= 0].tolist())))
+        keys = np.fromiter(chain.from_iterable(obs), np.int64, sum(map(len, obs)))
+        per_kf = np.bincount(keys) if len(keys) else np.zeros(0, np.int64)
+        seen = np.flatnonzero(per_kf)
+        counts = dict(zip(seen.tolist(), per_kf[seen].tolist()))
         counts.pop(rec.index, None)
         if self.params.use_lines:  # shared line landmarks make keyframes covisible too
             for lid in rec.line_landmark[rec.line_landmark >= 0].tolist():
