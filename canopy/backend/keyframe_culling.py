@@ -46,7 +46,7 @@ def redundant_fraction(mapper, k: int, min_observers: int) -> float:
     n_obs = np.fromiter(map(len, obs), np.int64, len(obs))
     total = int(n_obs.sum())
     e_kf = np.fromiter(chain.from_iterable(obs), np.int64, total)
-    e_kp = np.fromiter(chain.from_iterable(o.values() for o in obs), np.int64, total)
+    e_kp = np.fromiter(chain.from_iterable(map(dict.values, obs)), np.int64, total)
     # every observing keyframe's octaves laid end to end, found by an offset table
     kf_ids = np.unique(e_kf)
     table = np.concatenate([mapper.keyframes[kk].octave for kk in kf_ids.tolist()])

@@ -24,7 +24,8 @@ import numpy as np
 
 from canopy.backend.keyframe_culling import cull_redundant_keyframes
 from canopy.backend.local_ba import LocalBundleAdjustmentMixin
-from canopy.backend.map_store import Keyframe, Landmark, LandmarkStore, LineLandmark, MapStoreAccess, local_map_update
+from canopy.backend.map_store import Keyframe, Landmark, LandmarkStore, LineLandmark, MapStoreAccess, _sorted_unique_ids, \
+    local_map_update
 from canopy.backend.params import MappingParams
 from canopy.backend import point_confirmation as confirmation
 from canopy.backend.still_window import bounded_fixed, descriptor_observations, window_neighbours
@@ -330,10 +331,12 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         neigh.sort(key=lambda k: (-counts[k], -k))
         local = [rec.index] + window_neighbours(self, rec, neigh)  # neigh[:window_size - 1] unless still_window's option
         local_set = set(local)
-        seen = set()
-        for k in local:
-            seen.update(self.keyframes[k].landmark[self.keyframes[k].landmark >= 0].tolist())
-        fixed_set = set(chain.from_iterable(map(_OBS, map(self.landmarks.__getitem__, seen)))) - local_set
+        # the local keyframes' landmarks by one presence table, their observers chained into one array
+        # and made distinct there (sets built element by element cost ~1 ms per KITTI keyframe)
+        seen = _sorted_unique_ids(np.concatenate([self.keyframes[k].landmark for k in local])).tolist()
+        obs = list(map(_OBS, map(self.landmarks.__getitem__, seen)))
+        observers = np.fromiter(chain.from_iterable(obs), np.int64, sum(map(len, obs)))
+        fixed_set = set(_sorted_unique_ids(observers).tolist()) - local_set
         first = self._segment_first[rec.segment]
         if first in local_set and len(local) > 1:  # the segment's first keyframe fixes the gauge
             local.remove(first)
