@@ -55,18 +55,17 @@ def distinctive_index(desc: np.ndarray) -> np.ndarray:
     ~20-observation landmarks: the distance matrix summed word by word in uint16 (the (G,n,n,4)
     popcounts summed over their short last axis were ~half the cost) and the median ranked by the
     middle element (odd n) or the sum of the two middle ones (even n: twice the median, exact in
-    integers) from one ``np.partition``, with no float medians."""
+    integers) of the sorted rows, with no float medians."""
     G, n = desc.shape[:2]
     w = np.ascontiguousarray(as_words(desc.reshape(-1, 32)).reshape(G, n, 4).transpose(2, 0, 1))  # (4,G,n)
     D = np.zeros((G, n, n), np.uint16)
     for k in range(4):
         D += _popcount64(w[k][:, :, None] ^ w[k][:, None, :])
+    # the rows sorted (numpy's SIMD sort of 16-bit integers: 2-5x cheaper than np.partition with the two
+    # middle positions of an even n, and no dearer at odd n; the same order statistics)
+    S = np.sort(D, axis=2)
     h = n // 2
-    if n % 2:
-        key = np.partition(D, h, axis=2)[:, :, h]
-    else:
-        P = np.partition(D, (h - 1, h), axis=2)
-        key = P[:, :, h - 1].astype(np.int32) + P[:, :, h]
+    key = S[:, :, h] if n % 2 else S[:, :, h - 1].astype(np.int32) + S[:, :, h]
     return np.argmin(key, axis=1)
 
 
