@@ -126,6 +126,8 @@ class LocalMappingActor(Actor):
             changed = apply_mono_loop_result(self.mapper, result, update)
         else:
             changed = apply_loop_result(self.mapper, result, update, self.landmark_alias)
+            if changed and result.closed and int(result.candidate) >= 0:  # the loop's keyframes stay (culling)
+                self.mapper.keep_loop_edge(result.keyframe_index, result.candidate)
         self.loops = max(self.loops, int(result.loops))
         if changed:
             self.map_changed = True

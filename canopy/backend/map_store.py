@@ -295,7 +295,7 @@ class MapStoreAccess:
         n_obs = np.fromiter(map(len, obs), np.int64, len(obs))
         total = int(n_obs.sum())
         e_kf = np.fromiter(chain.from_iterable(obs), np.int64, total)
-        e_kp = np.fromiter(chain.from_iterable(o.values() for o in obs), np.int64, total)
+        e_kp = np.fromiter(chain.from_iterable(map(dict.values, obs)), np.int64, total)
         e_lm = np.repeat(lm_arr, n_obs)
         if total == 0 or not kf_set:
             keep = np.zeros(total, bool)
