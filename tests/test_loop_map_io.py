@@ -65,3 +65,29 @@ def test_map_from_another_calibration_version_or_format_is_refused(tmp_path, bui
         load_map(tmp_path / "junk.canopy", calib)
     with pytest.raises(InputError, match="map file not found"):
         load_map(tmp_path / "missing.canopy", calib)
+
+
+def test_loop_keyframes_survive_save_and_load_and_old_files_load_without_them(tmp_path, built_map):
+    """A closed loop's keyframes stay protected from culling in a run that extends a saved map
+    (ORB-SLAM's SetNotErase, s17); a file written before the field existed loads with none, and a
+    file naming a keyframe it does not hold is refused."""
+    calib, mapper = built_map
+    a, b = sorted(mapper.keyframes)[:2]
+    mapper.keep_loop_edge(b, a)
+    try:
+        path = save_map(tmp_path / "map.canopy", map_from_mapper(mapper))
+    finally:
+        mapper.loop_keyframes.clear()
+    restored = LocalMapper(calib)
+    restore_mapper(load_map(path, calib), restored)
+    assert restored.loop_keyframes == {a, b}
+    doc = msgpack.unpackb(path.read_bytes(), raw=False)
+    del doc["arrays"]["loop_keyframes"]                         # as s16's files were
+    (tmp_path / "old.canopy").write_bytes(msgpack.packb(doc, use_bin_type=True))
+    old = LocalMapper(calib)
+    restore_mapper(load_map(tmp_path / "old.canopy", calib), old)
+    assert old.loop_keyframes == set() and sorted(old.keyframes) == sorted(mapper.keyframes)
+    doc["arrays"]["loop_keyframes"] = {"dtype": "<i8", "shape": [1], "data": np.int64(10**6).tobytes()}
+    (tmp_path / "bad.canopy").write_bytes(msgpack.packb(doc, use_bin_type=True))
+    with pytest.raises(InputError, match="loop keyframes it does not hold"):
+        load_map(tmp_path / "bad.canopy", calib)

@@ -2,14 +2,15 @@
 
 The file holds what relocalising and extending a map need: keyframes (pose, keypoints with
 stereo, descriptors, the landmark each keypoint observes), landmarks (position, descriptor),
-covisibility (shared-landmark counts), the calibration it was built with and the id of the
+covisibility (shared-landmark counts), the keyframes of closed loops (never culled, ORB-SLAM's
+SetNotErase; optional: older files without it load with none), the calibration it was built with and the id of the
 vocabulary its place recognition used. Arrays are stored as raw bytes with dtype and shape.
 A file of another format version, or built with another calibration, is refused with an
 error that says which.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import msgpack
@@ -56,7 +57,10 @@ class MapData:
     lm_descriptor: np.ndarray   # (M,32) uint8
     lm_segment: np.ndarray      # (M,) int64
     covisibility: np.ndarray    # (P,3) int64: keyframe a, keyframe b, shared landmarks
+    # keyframes of closed loops (LocalMapper.loop_keyframes): a run extending the map must not cull them
+    loop_keyframes: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
+    OPTIONAL_ARRAYS = ("loop_keyframes",)   # written always, read when present (files of s16 and before lack it)
     ARRAYS = ("kf_index", "kf_timestamp", "kf_pose", "kf_segment", "kf_offsets", "uv", "u_right", "octave",
               "descriptors", "landmark", "lm_id", "lm_position", "lm_descriptor", "lm_segment", "covisibility")
 
@@ -94,14 +98,15 @@ def map_from_mapper(mapper, vocabulary: str = "") -> MapData:
         landmark=cat(lambda k: k.landmark, (-1,), np.int64),
         lm_id=np.array(lids, np.int64), lm_position=np.array([lm.position for lm in lms], float).reshape(-1, 3),
         lm_descriptor=np.array([lm.descriptor for lm in lms], np.uint8).reshape(-1, 32),
-        lm_segment=np.array([lm.segment for lm in lms], np.int64), covisibility=cov)
+        lm_segment=np.array([lm.segment for lm in lms], np.int64), covisibility=cov,
+        loop_keyframes=np.array(sorted(set(getattr(mapper, "loop_keyframes", ())) & set(idx)), np.int64))
 
 
 def save_map(path: str | Path, data: MapData) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     doc = {"format": MAP_FORMAT, "version": MAP_VERSION, "calibration": data.calibration.to_dict(),
-           "vocabulary": data.vocabulary, "arrays": {n: _pack_array(getattr(data, n)) for n in MapData.ARRAYS}}
+           "vocabulary": data.vocabulary, "arrays": {n: _pack_array(getattr(data, n)) for n in MapData.ARRAYS + MapData.OPTIONAL_ARRAYS}}
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_bytes(msgpack.packb(doc, use_bin_type=True))
     tmp.replace(path)  # never a half-written map under the final name
@@ -143,9 +148,12 @@ def load_map(path: str | Path, calib: StereoCalibration | None = None) -> MapDat
     except TypeError as exc:
         raise InputError(path, f"map calibration is incomplete ({exc})") from None
     data = MapData(calibration=cal, vocabulary=str(doc.get("vocabulary", "")),
-                   **{n: _unpack_array(arrays[n], path, n) for n in MapData.ARRAYS})
+                   **{n: _unpack_array(arrays[n], path, n) for n in MapData.ARRAYS + MapData.OPTIONAL_ARRAYS
+                      if n in arrays})
     if len(data.kf_offsets) != len(data.kf_index) + 1 or int(data.kf_offsets[-1]) != len(data.uv):
         raise InputError(path, "map keyframe table is inconsistent with its keypoints")
+    if not np.isin(data.loop_keyframes, data.kf_index).all():
+        raise InputError(path, "map names loop keyframes it does not hold")
     return data
 
 
@@ -168,6 +176,8 @@ def restore_mapper(data: MapData, mapper) -> None:
             lm = mapper.landmarks.get(int(rec.landmark[i]))
             if lm is not None:
                 lm.obs[index] = i
+    if hasattr(mapper, "loop_keyframes"):   # the loop's keyframes stay protected from culling
+        mapper.loop_keyframes = set(data.loop_keyframes.tolist())
     mapper._order = len(data.kf_index)
     mapper._segment = int(data.kf_segment.max()) if len(data.kf_segment) else -1
     # each segment's first keyframe holds the gauge in local BA (LocalMapper._local_window)
