@@ -43,6 +43,7 @@ from canopy.frontend.matching import as_words
 from canopy.frontend.motion_check import ransac_or_prediction
 from canopy.frontend.messages import TrackingResult
 from canopy.frontend.params import TrackingParams
+from canopy.frontend.pose import MotionPrior
 from canopy.frontend.stereo import StereoMatches
 from canopy.frontend.track_health import LOST_TOO_FEW_MATCHES, image_noise_sigma, judge_pose
 from canopy.frontend.tracker_lines import TrackerLinesMixin
@@ -266,6 +267,11 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
                      lines: LineFrame | None = None) -> TrackingResult:
         p = self.params
         T_pred_cw = se3_inv(self._T_last @ self._velocity)  # constant-velocity prediction
+        self._motion_prior = None  # tracking.motion_prior_sigma_*: the prediction as a pose prior
+        # (not after a gap: a bridged prediction T_last V^(k+1) has no per-frame sigma)
+        if ((p.motion_prior_sigma_deg > 0 or p.motion_prior_sigma_m > 0) and self._velocity_valid
+                and self._n_failed == 0 and self._lost_streak == 0):
+            self._motion_prior = MotionPrior(T_pred_cw, np.radians(p.motion_prior_sigma_deg), p.motion_prior_sigma_m)
         kp_words = as_words(feats.descriptors)
         view = self._map_view()
 
