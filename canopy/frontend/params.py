@@ -255,6 +255,9 @@ class TrackingParams:
     # Each 0 leaves its part out; both 0: off (docs/notes/s17-motionprior.md).
     motion_prior_sigma_deg: float = 0.0
     motion_prior_sigma_m: float = 0.0
+    # > 0: the prior joins only refinements whose matches leave the rotation this uncertain (the
+    # largest rotation std in degrees of the inverse information at the starting pose); 0: all.
+    motion_prior_min_rot_std_deg: float = 0.0
     # FAST threshold floor on noisy images: fast_noise_factor x the image noise sigma (Immerkaer
     # estimate); 0 switches it off. Clean images (the estimate sees fine texture too: 2-6 grey
     # levels on KITTI, EuRoC and the generated sequences) keep fast_threshold.
@@ -438,6 +441,7 @@ class TrackingParams:
         need(self.ransac_max_deviation_m >= 0, "ransac_max_deviation_m", "must be >= 0 (0: off)")
         need(self.motion_prior_sigma_deg >= 0, "motion_prior_sigma_deg", "must be >= 0 (0: off)")
         need(self.motion_prior_sigma_m >= 0, "motion_prior_sigma_m", "must be >= 0 (0: off)")
+        need(self.motion_prior_min_rot_std_deg >= 0, "motion_prior_min_rot_std_deg", "must be >= 0 (0: always)")
         need(self.max_predicted_frames >= 0, "max_predicted_frames", "must be >= 0")
         need(self.fast_noise_factor >= 0, "fast_noise_factor", "must be >= 0")
         need(self.pixel_sigma > 0, "pixel_sigma", "must be > 0")
