@@ -192,11 +192,16 @@ class MotionPrior:
     no inlier set, and no information to the pose's (the entropy of AGRI Eq. 6 stays the
     measurements')."""
 
-    def __init__(self, T_pred_cw: np.ndarray, sigma_rot: float, sigma_trans: float):
+    def __init__(self, T_pred_cw: np.ndarray, sigma_rot, sigma_trans, pose_variance: np.ndarray | None = None):
+        """``sigma_rot`` / ``sigma_trans``: scalars or per-axis (3,); <= 0 leaves that part out.
+        ``pose_variance`` (6,): variances added per axis (the prediction's own uncertainty: a
+        filter's predicted covariance is the process noise plus the propagated state's)."""
         self.T_pred = np.asarray(T_pred_cw, float)
-        w_rot = 1.0 / sigma_rot**2 if sigma_rot > 0 else 0.0
-        w_trans = 1.0 / sigma_trans**2 if sigma_trans > 0 else 0.0
-        self.weights = np.array([w_rot] * 3 + [w_trans] * 3)
+        sig = np.concatenate([np.broadcast_to(np.asarray(sigma_rot, float), 3),
+                              np.broadcast_to(np.asarray(sigma_trans, float), 3)])
+        on = sig > 0
+        var = sig**2 + (0.0 if pose_variance is None else np.asarray(pose_variance, float))
+        self.weights = np.where(on, 1.0 / np.where(on, var, 1.0), 0.0)
 
     def residual(self, T_cw: np.ndarray) -> np.ndarray:
         R_d = self.T_pred[:3, :3] @ T_cw[:3, :3].T
