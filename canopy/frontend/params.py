@@ -249,6 +249,19 @@ class TrackingParams:
     # 40-80 noisy matches picks yaw-plus-sideways poses 4-6 deg / 1 m off (docs/notes/s14-darkhaze.md).
     ransac_max_deviation_deg: float = 0.0
     ransac_max_deviation_m: float = 0.0
+    # > 0: motion-only refinement adds a prior pulling the pose toward the constant-velocity
+    # prediction with these standard deviations per axis (degrees / metres of the camera frame;
+    # canopy.frontend.pose.MotionPrior), on frames whose motion model has seen two tracked frames.
+    # Each 0 leaves its part out; both 0: off (docs/notes/s17-motionprior.md).
+    motion_prior_sigma_deg: float = 0.0
+    motion_prior_sigma_m: float = 0.0
+    # > 0: the prior joins only refinements whose matches leave the rotation this uncertain (the
+    # largest rotation std in degrees of the inverse information at the starting pose); 0: all.
+    motion_prior_min_rot_std_deg: float = 0.0
+    # > 0: the prior's variances per axis add this times the last pose's (diagonal of its inverse
+    # information): the constant-velocity prediction 2 T_k-1 - T_k-2 carries ~5 x a pose's variance
+    # when the poses' errors are independent. 0: the fixed sigmas above.
+    motion_prior_pose_var_factor: float = 0.0
     # FAST threshold floor on noisy images: fast_noise_factor x the image noise sigma (Immerkaer
     # estimate); 0 switches it off. Clean images (the estimate sees fine texture too: 2-6 grey
     # levels on KITTI, EuRoC and the generated sequences) keep fast_threshold.
@@ -433,6 +446,10 @@ class TrackingParams:
         need(self.max_motion_deviation_deg > 0, "max_motion_deviation_deg", "must be > 0")
         need(self.ransac_max_deviation_deg >= 0, "ransac_max_deviation_deg", "must be >= 0 (0: off)")
         need(self.ransac_max_deviation_m >= 0, "ransac_max_deviation_m", "must be >= 0 (0: off)")
+        need(self.motion_prior_sigma_deg >= 0, "motion_prior_sigma_deg", "must be >= 0 (0: off)")
+        need(self.motion_prior_sigma_m >= 0, "motion_prior_sigma_m", "must be >= 0 (0: off)")
+        need(self.motion_prior_min_rot_std_deg >= 0, "motion_prior_min_rot_std_deg", "must be >= 0 (0: always)")
+        need(self.motion_prior_pose_var_factor >= 0, "motion_prior_pose_var_factor", "must be >= 0 (0: off)")
         need(self.max_predicted_frames >= 0, "max_predicted_frames", "must be >= 0")
         need(self.fast_noise_factor >= 0, "fast_noise_factor", "must be >= 0")
         need(self.pixel_sigma > 0, "pixel_sigma", "must be > 0")

@@ -43,6 +43,7 @@ from canopy.frontend.matching import as_words
 from canopy.frontend.motion_check import ransac_or_prediction
 from canopy.frontend.messages import TrackingResult
 from canopy.frontend.params import TrackingParams
+from canopy.frontend.pose import MotionPrior
 from canopy.frontend.stereo import StereoMatches
 from canopy.frontend.track_health import LOST_TOO_FEW_MATCHES, image_noise_sigma, judge_pose
 from canopy.frontend.tracker_lines import TrackerLinesMixin
@@ -266,6 +267,15 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
                      lines: LineFrame | None = None) -> TrackingResult:
         p = self.params
         T_pred_cw = se3_inv(self._T_last @ self._velocity)  # constant-velocity prediction
+        self._motion_prior = None  # tracking.motion_prior_sigma_*: the prediction as a pose prior
+        # (not after a gap: a bridged prediction T_last V^(k+1) has no per-frame sigma)
+        if ((p.motion_prior_sigma_deg > 0 or p.motion_prior_sigma_m > 0) and self._velocity_valid
+                and self._n_failed == 0 and self._lost_streak == 0):
+            var = None
+            if p.motion_prior_pose_var_factor > 0 and getattr(self, "_prior_pose_var", None) is not None:
+                var = p.motion_prior_pose_var_factor * self._prior_pose_var
+            self._motion_prior = MotionPrior(T_pred_cw, np.radians(p.motion_prior_sigma_deg), p.motion_prior_sigma_m,
+                                             pose_variance=var)
         kp_words = as_words(feats.descriptors)
         view = self._map_view()
 
@@ -340,6 +350,11 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
             return self._not_tracked(frame, reason, 0 if est is None else int(est.inliers.sum()), n_matches)
         self._n_failed = 0
         T_cw, inliers, info = est.T_cam_world, est.inliers, est.information
+        if p.motion_prior_pose_var_factor > 0:  # this pose's variances, for the next frame's prior
+            try:
+                self._prior_pose_var = np.clip(np.diag(np.linalg.inv(info)), 0.0, None)
+            except np.linalg.LinAlgError:
+                self._prior_pose_var = None
         line_matched = ref_lines = None
         if lines is not None:
             linl = est.line_inliers

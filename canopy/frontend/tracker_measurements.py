@@ -11,15 +11,21 @@ The frame's stereo matches as pose refinement and landmark creation see them (``
 """
 from __future__ import annotations
 
+import os
+import sys
+
 import numpy as np
 
 from canopy.enhance.noise import estimate_noise
 from canopy.frontend.features import Features
 from canopy.frontend.keypoint_uncertainty import disparity_sigma
-from canopy.frontend.geometry import transform
+from canopy.frontend.geometry import pose_information, project_stereo, stereo_pose_jacobian, transform
+from canopy.frontend.pose import refine_pose
 from canopy.frontend.stereo import StereoMatches
 from canopy.frontend.stereo_silhouette import ContourParams, SilhouetteDetector
 from canopy.frontend.tracker_worker import StereoJob, record_stage as _stage, stage_clock as _clock
+
+_MP_DEBUG = bool(os.environ.get("CANOPY_MOTION_PRIOR_DEBUG"))  # print the gate's rotation std per refinement
 
 
 class TrackerMeasurementsMixin:
@@ -162,7 +168,36 @@ class TrackerMeasurementsMixin:
     def _refine(self, T_cw, X, r, feats, stereo, inliers=None, line_obs=None):
         # far points as monocular measurements (see _bearing_only_far)
         obs = self._stereo_obs if stereo is self._stereo_last else stereo
+        prior = getattr(self, "_motion_prior", None)
+        if prior is not None and line_obs is None and self._measurements_weak(T_cw, X, r, feats, obs, inliers):
+            # tracking.motion_prior_sigma_*: the constant-velocity prediction joins as a pose prior
+            p = self.params
+            meas = np.concatenate([feats.uv[r].astype(np.float64), obs.u_right[r, None].astype(np.float64)], axis=1)
+            return refine_pose(T_cw, X, meas, obs.valid[r], self._sigma(feats.octave[r]), self.calib,
+                               p.pose_opt_rounds, p.pose_opt_iterations, p.chi2_mono, p.chi2_stereo,
+                               inliers=inliers, extra=prior)
         return super()._refine(T_cw, X, r, feats, obs, inliers=inliers, line_obs=line_obs)
+
+    def _measurements_weak(self, T_cw, X, r, feats, obs, inliers) -> bool:
+        """tracking.motion_prior_min_rot_std_deg: the prior joins only when the matches' own
+        rotation uncertainty at the starting pose (the largest standard deviation of the rotation
+        block of (J^T Sigma^-1 J)^-1, the information refine_pose reports) reaches it; 0: always."""
+        gate = self.params.motion_prior_min_rot_std_deg
+        if gate <= 0 and not _MP_DEBUG:
+            return True
+        m = np.ones(len(X), bool) if inliers is None else inliers
+        _, Pc = project_stereo(T_cw, X[m], self.calib)
+        front = Pc[:, 2] > 1e-6
+        info = pose_information(stereo_pose_jacobian(Pc[front], self.calib), self._sigma(feats.octave[r][m][front]),
+                                obs.valid[r][m][front].astype(float))
+        try:
+            cov = np.linalg.inv(info)
+        except np.linalg.LinAlgError:
+            return True
+        rot_std = float(np.degrees(np.sqrt(max(np.linalg.eigvalsh(cov[:3, :3]).max(), 0.0))))
+        if _MP_DEBUG:
+            print(f"MPDEBUG rot_std_deg {rot_std:.5f} n {int(front.sum())}", file=sys.stderr, flush=True)
+        return rot_std >= gate
 
     def _record_viewing(self, ids: np.ndarray, pos: np.ndarray, centre: np.ndarray, octave: np.ndarray) -> None:
         """ORB-SLAM's MapPoint normal and max distance (UpdateNormalAndDepth) at creation:
