@@ -112,14 +112,16 @@ class MapTrackingMixin:
         mask[inl.reshape(-1)] = True
         return pose_from_rvec(rvec, tvec), mask
 
-    def _refine(self, T_cw, X, r, feats: Features, stereo: StereoMatches, inliers=None, line_obs=None):
+    def _refine(self, T_cw, X, r, feats: Features, stereo: StereoMatches, inliers=None, line_obs=None, extra=None):
         """Motion-only refinement; with ``line_obs`` = (A_w, B_w, line coefficients) the Eq. 10
-        line terms join the point terms (Eq. 11 with the map fixed)."""
+        line terms join the point terms (Eq. 11 with the map fixed); ``extra``: more terms for the
+        point-only solve (``pose.ExtraTerms``, e.g. the motion prior)."""
         p = self.params
         meas = np.concatenate([feats.uv[r].astype(np.float64), stereo.u_right[r, None].astype(np.float64)], axis=1)
         if line_obs is None:
             return refine_pose(T_cw, X, meas, stereo.valid[r], self._sigma(feats.octave[r]), self.calib,
-                               p.pose_opt_rounds, p.pose_opt_iterations, p.chi2_mono, p.chi2_stereo, inliers=inliers)
+                               p.pose_opt_rounds, p.pose_opt_iterations, p.chi2_mono, p.chi2_stereo, inliers=inliers,
+                               extra=extra)
         A_w, B_w, coeffs = line_obs
         return self._lt.refine_pose_points_lines(T_cw, X, meas, stereo.valid[r], self._sigma(feats.octave[r]), self.calib,
                                                  p.pose_opt_rounds, p.pose_opt_iterations, p.chi2_mono, p.chi2_stereo,

@@ -20,7 +20,6 @@ from canopy.enhance.noise import estimate_noise
 from canopy.frontend.features import Features
 from canopy.frontend.keypoint_uncertainty import disparity_sigma
 from canopy.frontend.geometry import pose_information, project_stereo, stereo_pose_jacobian, transform
-from canopy.frontend.pose import refine_pose
 from canopy.frontend.stereo import StereoMatches
 from canopy.frontend.stereo_silhouette import ContourParams, SilhouetteDetector
 from canopy.frontend.tracker_worker import StereoJob, record_stage as _stage, stage_clock as _clock
@@ -168,15 +167,11 @@ class TrackerMeasurementsMixin:
     def _refine(self, T_cw, X, r, feats, stereo, inliers=None, line_obs=None):
         # far points as monocular measurements (see _bearing_only_far)
         obs = self._stereo_obs if stereo is self._stereo_last else stereo
+        # tracking.motion_prior_sigma_*: the constant-velocity prediction joins as a pose prior
         prior = getattr(self, "_motion_prior", None)
-        if prior is not None and line_obs is None and self._measurements_weak(T_cw, X, r, feats, obs, inliers):
-            # tracking.motion_prior_sigma_*: the constant-velocity prediction joins as a pose prior
-            p = self.params
-            meas = np.concatenate([feats.uv[r].astype(np.float64), obs.u_right[r, None].astype(np.float64)], axis=1)
-            return refine_pose(T_cw, X, meas, obs.valid[r], self._sigma(feats.octave[r]), self.calib,
-                               p.pose_opt_rounds, p.pose_opt_iterations, p.chi2_mono, p.chi2_stereo,
-                               inliers=inliers, extra=prior)
-        return super()._refine(T_cw, X, r, feats, obs, inliers=inliers, line_obs=line_obs)
+        if prior is not None and (line_obs is not None or not self._measurements_weak(T_cw, X, r, feats, obs, inliers)):
+            prior = None
+        return super()._refine(T_cw, X, r, feats, obs, inliers=inliers, line_obs=line_obs, extra=prior)
 
     def _measurements_weak(self, T_cw, X, r, feats, obs, inliers) -> bool:
         """tracking.motion_prior_min_rot_std_deg: the prior joins only when the matches' own
