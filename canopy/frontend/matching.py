@@ -7,6 +7,8 @@ the surviving pairs are computed in one batch (XOR + popcount on uint64 words).
 """
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 if hasattr(np, "bitwise_count"):
@@ -24,6 +26,28 @@ DESCRIPTOR_BYTES = 32
 # with 1; EuRoC (denser) 4.17, 4.03, 7.79: one grid finds 2.5-3.5x the pairs, 8 grids cost a ~10^5-cell
 # table and query x 8 x 3 row ranges
 SCALE_BANDS = 3
+
+
+class _Scratch(threading.local):
+    """Per-thread buffers for ``match_in_window``'s pair-sized temporaries, reused from call to call.
+
+    Why: a fresh array for the ~10^4-10^5 pairs of a search is fresh memory (glibc hands blocks of
+    this size back to the kernel when they are freed: munmap, or a trim of the heap top), and the
+    first write to each of its pages is a page fault. On EuRoC that was ~400 faults and ~1.5 ms of
+    each frame's ~5.4 ms of searches (getrusage minor faults, thread CPU; s19-mapsearch). One set
+    per thread, as other threads (the stereo worker, loop closing) match at the same time; nothing
+    returned ever points into them."""
+
+    def get(self, name: str, n: int, dtype, width: int = 0) -> np.ndarray:
+        buf = self.__dict__.get(name)
+        if buf is None or len(buf) < n or buf.dtype != dtype or buf.shape[1:] != ((width,) if width else ()):
+            shape = (n + n // 4 + 1024,) + ((width,) if width else ())   # room to grow a little
+            buf = np.empty(shape, dtype)
+            self.__dict__[name] = buf
+        return buf[:n]
+
+
+_SCRATCH = _Scratch()
 
 
 def floor_divide(a, b) -> np.ndarray:
@@ -63,6 +87,20 @@ def hamming_pairs(words_a: np.ndarray, words_b: np.ndarray, ia: np.ndarray, ib: 
     dist = _popcount64(x[:, 0]).astype(np.int32)
     for i in range(1, x.shape[1]):
         dist += _popcount64(x[:, i])
+    return dist
+
+
+def _hamming_scratch(words_a: np.ndarray, words_b: np.ndarray, ia: np.ndarray, ib: np.ndarray) -> np.ndarray:
+    """``hamming_pairs`` for valid indices, its row gathers and counts in ``_SCRATCH``."""
+    n, w = len(ia), words_a.shape[1]
+    if n == 0 or not hasattr(np, "bitwise_count"):
+        return hamming_pairs(words_a, words_b, ia, ib)
+    x = np.take(words_a, ia, axis=0, out=_SCRATCH.get("ham_a", n, words_a.dtype, w), mode="clip")
+    x ^= np.take(words_b, ib, axis=0, out=_SCRATCH.get("ham_b", n, words_b.dtype, w), mode="clip")
+    c = np.bitwise_count(x, out=_SCRATCH.get("ham_c", n, np.uint8, w))
+    dist = c[:, 0].astype(np.int32)                  # column by column, as hamming_pairs
+    for i in range(1, w):
+        dist += c[:, i]
     return dist
 
 
@@ -238,6 +276,60 @@ def grid_rank(q_uv: np.ndarray, r_uv: np.ndarray, r_group: np.ndarray, cells: np
     return rank
 
 
+def _grid_ranges(q_uv: np.ndarray, r_uv: np.ndarray, r_group: np.ndarray, cells: np.ndarray):
+    """The references' cell order and, per query, its 3 x n_groups ranges of positions in that
+    order (see ``grid_pairs_grouped``): (order, lo (Q, 3G), counts (Q, 3G))."""
+    cells, lo_uv, n_cols, sizes, offset, rkey = _grouped_grid(q_uv, r_uv, r_group, cells)
+    order = np.argsort(rkey, kind="stable")
+    start = np.zeros(int(sizes.sum()) + 1, np.int64)   # start[k]: references with a key < k
+    np.cumsum(np.bincount(rkey, minlength=len(start) - 1), out=start[1:])
+    qc = floor_divide((q_uv - lo_uv)[:, None, :], cells[None, :, None]).astype(np.int64)    # (Q,G,2)
+    row = qc[:, :, None, 1] + np.arange(-1, 2)                                       # (Q,G,3)
+    # a query's cells lie inside its group's grid (one spare row/column each side); row -1 is empty
+    base = offset[None, :, None] + np.maximum(row, 0) * n_cols[None, :, None]
+    lo = start[base + np.maximum(qc[:, :, None, 0] - 1, 0)]
+    hi = start[base + qc[:, :, None, 0] + 2]
+    counts = np.where(row >= 0, hi - lo, 0)
+    return order, lo.reshape(len(q_uv), -1), counts.reshape(len(q_uv), -1)
+
+
+def _range_pairs(lo: np.ndarray, counts: np.ndarray):
+    """The pairs of ``_grid_ranges``' ranges: (query per pair, position in the cell order per pair,
+    pairs per query). A query's ranges are consecutive, so its pairs are one ``repeat`` by its total."""
+    per_query = counts.sum(axis=1)
+    total = int(per_query.sum())
+    query = np.repeat(np.arange(len(lo)), per_query)
+    c = counts.reshape(-1)
+    rpos = np.repeat(lo.reshape(-1) - np.cumsum(c) + c, c)
+    rpos += np.arange(total)
+    return query, rpos, per_query
+
+
+def _steps_cumsum(out: np.ndarray, at: np.ndarray, jumps: np.ndarray, step: int) -> np.ndarray:
+    """``out`` := the running sum of ``step`` everywhere except ``jumps`` at positions ``at``: runs
+    of consecutive values in place (``np.repeat`` has no ``out``; integers, so exact)."""
+    out.fill(step)
+    out[at] = jumps
+    return np.cumsum(out, out=out)
+
+
+def _range_pairs_scratch(lo: np.ndarray, counts: np.ndarray, total: int):
+    """``_range_pairs``' (query, position) arrays, in ``_SCRATCH`` (``total`` > 0 pairs)."""
+    c = counts.reshape(-1)
+    nz = np.flatnonzero(c)
+    c_nz, lo_nz = c[nz], lo.reshape(-1)[nz]
+    first = np.cumsum(c_nz) - c_nz                   # each non-empty range's first pair
+    jump = np.empty(len(nz), np.int64)               # its first position minus the last one before
+    jump[0] = lo_nz[0]
+    jump[1:] = lo_nz[1:] - (lo_nz[:-1] + c_nz[:-1] - 1)
+    rpos = _steps_cumsum(_SCRATCH.get("rpos", total, np.int64), first, jump, 1)
+    per_query = counts.sum(axis=1)
+    qz = np.flatnonzero(per_query)                   # queries with pairs: the query steps up there
+    q_first = np.cumsum(per_query[qz]) - per_query[qz]
+    query = _steps_cumsum(_SCRATCH.get("query", total, np.int64), q_first, np.diff(qz, prepend=0), 0)
+    return query, rpos
+
+
 def grid_pairs_grouped(q_uv: np.ndarray, r_uv: np.ndarray, r_group: np.ndarray,
                        cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``grid_pairs`` for references in groups, group g on its own grid of cell side
@@ -250,23 +342,8 @@ def grid_pairs_grouped(q_uv: np.ndarray, r_uv: np.ndarray, r_group: np.ndarray,
     cell starts (counting sort: ``bincount`` + ``cumsum``) instead of two binary searches per
     range; the pairs, and their order (by query, then key, then reference index), are those of
     the binary search."""
-    cells, lo_uv, n_cols, sizes, offset, rkey = _grouped_grid(q_uv, r_uv, r_group, cells)
-    order = np.argsort(rkey, kind="stable")
-    start = np.zeros(int(sizes.sum()) + 1, np.int64)   # start[k]: references with a key < k
-    np.cumsum(np.bincount(rkey, minlength=len(start) - 1), out=start[1:])
-    qc = floor_divide((q_uv - lo_uv)[:, None, :], cells[None, :, None]).astype(np.int64)    # (Q,G,2)
-    row = qc[:, :, None, 1] + np.arange(-1, 2)                                       # (Q,G,3)
-    # a query's cells lie inside its group's grid (one spare row/column each side); row -1 is empty
-    base = offset[None, :, None] + np.maximum(row, 0) * n_cols[None, :, None]
-    lo = start[base + np.maximum(qc[:, :, None, 0] - 1, 0)]
-    hi = start[base + qc[:, :, None, 0] + 2]
-    counts = np.where(row >= 0, hi - lo, 0).reshape(-1)
-    total = int(counts.sum())
-    if total == 0:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    # the query of every pair: its 3 x n_groups ranges are consecutive, so one repeat by its total
-    query = np.repeat(np.arange(len(q_uv)), counts.reshape(len(q_uv), -1).sum(axis=1))
-    rpos = np.repeat(lo.reshape(-1) - np.cumsum(counts) + counts, counts) + np.arange(total)
+    order, lo, counts = _grid_ranges(q_uv, r_uv, r_group, cells)
+    query, rpos, _ = _range_pairs(lo, counts)
     return query, order[rpos]
 
 
@@ -296,10 +373,12 @@ def match_in_window(q_uv: np.ndarray, q_words: np.ndarray, q_radius: np.ndarray,
         sel = np.arange(n_q)
     if len(sel) == 0:
         return empty
-    rmax = float(np.max(q_radius[sel]))
+    q_sel = q_uv[sel]
+    q_rad = q_radius[sel]
+    rmax = float(np.max(q_rad))
     tie_rank = None
     if r_scale is None:
-        qi, rj = grid_pairs_grouped(q_uv[sel], r_uv, np.zeros(len(r_uv), np.int64), np.array([rmax]))
+        order, lo, counts = _grid_ranges(q_sel, r_uv, np.zeros(len(r_uv), np.int64), np.array([rmax]))
     else:
         # The pairs within the scaled radii are the pairs of one grid per reference scale (cells of
         # rmax x scale), and equal distances go to the earlier pair of that grid's order. Those
@@ -312,30 +391,60 @@ def match_in_window(q_uv: np.ndarray, q_words: np.ndarray, q_radius: np.ndarray,
         group = group.reshape(-1)
         n_bands = min(SCALE_BANDS, len(scales))
         if n_bands == len(scales):
-            qi, rj = grid_pairs_grouped(q_uv[sel], r_uv, group, rmax * scales)
+            order, lo, counts = _grid_ranges(q_sel, r_uv, group, rmax * scales)
         else:
-            tie_rank = grid_rank(q_uv[sel], r_uv, group, rmax * scales)
+            tie_rank = grid_rank(q_sel, r_uv, group, rmax * scales)
             band = np.arange(len(scales)) * n_bands // len(scales)
             band_cells = rmax * scales[np.flatnonzero(np.diff(band, append=n_bands))]  # each band's widest
-            qi, rj = grid_pairs_grouped(q_uv[sel], r_uv, band[group], band_cells)
-    qi = sel[qi]
-    # the circle test on 1-D float64 coordinates (gathers of 2-D rows cost ~3x more); the same
-    # arithmetic (dtype) as ((q - r) ** 2).sum(axis=1)
+            order, lo, counts = _grid_ranges(q_sel, r_uv, band[group], band_cells)
+            tie_rank = tie_rank[order]
+    # From here the references are addressed by their position in the grid's cell order (``rpos``)
+    # and the queries by their position in ``sel``: the references' coordinates, words, scales and
+    # levels are put in that order once (~10^3 rows) instead of gathering through ``order`` and
+    # ``sel`` for every one of the ~10^4-10^5 pairs; the pairs keep their order (by query, then cell
+    # order), so equal distances go to the same pair, and the few matches map back at the end. The
+    # pair-sized arrays live in ``_SCRATCH`` (page faults, see there) until the circle test is done.
+    total = int(counts.sum())
+    if total == 0:
+        return empty
+    qi, rpos = _range_pairs_scratch(lo, counts, total)
+    # the circle test, per coordinate (gathers of 2-D rows cost ~3x more), in place; the same
+    # arithmetic (dtype, operations) as ((q - r) ** 2).sum(axis=1) <= (radius [x scale]) ** 2
     dt = np.result_type(q_uv, r_uv)
-    du = np.ascontiguousarray(q_uv[:, 0], dt)[qi] - np.ascontiguousarray(r_uv[:, 0], dt)[rj]
-    dv = np.ascontiguousarray(q_uv[:, 1], dt)[qi] - np.ascontiguousarray(r_uv[:, 1], dt)[rj]
-    rad = q_radius[qi] if r_scale is None else q_radius[qi] * r_scale[rj]
-    ok = du * du + dv * dv <= rad * rad
-    qi, rj = qi[ok], rj[ok]
-    dist = hamming_pairs(q_words, r_words, qi, rj)
-    best_ref, best_d, second_d, second_r = best_two(qi, rj, dist, n_q, second_ref=True, tie_rank=tie_rank)
+    r_sorted = np.take(r_uv, order, axis=0)
+    d2, dv, tmp = (_SCRATCH.get(name, total, dt) for name in ("d2", "dv", "tmp"))
+    for d, col in ((d2, 0), (dv, 1)):       # (mode="clip": no buffered copy; the indices are valid)
+        np.take(np.ascontiguousarray(q_sel[:, col], dt), qi, out=d, mode="clip")
+        np.take(np.ascontiguousarray(r_sorted[:, col], dt), rpos, out=tmp, mode="clip")
+        d -= tmp
+        d *= d
+    d2 += dv
+    ok = _SCRATCH.get("ok", total, bool)
+    if q_rad.min() == q_rad.max():
+        # one radius for all queries (the tracker's searches): its square per reference scale, the
+        # same per-element products as q_radius[qi] * r_scale[rj] squared
+        rad = q_rad[:1] if r_scale is None else q_rad[:1] * r_scale[order]
+        rad = rad * rad
+        if r_scale is not None:
+            rad = np.take(rad, rpos, out=_SCRATCH.get("rad", total, rad.dtype), mode="clip")
+        np.less_equal(d2, rad, out=ok)
+    else:
+        rad = q_rad[qi]
+        if r_scale is not None:
+            rad = rad * r_scale[order][rpos]
+        np.less_equal(d2, rad * rad, out=ok)
+    kept = np.flatnonzero(ok)        # (a boolean index of the ~5*10^4 pairs is ~3x slower than these)
+    qi, rpos = np.take(qi, kept), np.take(rpos, kept)
+    dist = _hamming_scratch(np.take(q_words, sel, axis=0), np.take(r_words, order, axis=0), qi, rpos)
+    best_ref, best_d, second_d, second_r = best_two(qi, rpos, dist, len(sel), second_ref=True, tie_rank=tie_rank)
     ambiguous = best_d >= ratio * second_d
     if r_level is not None:
-        ambiguous &= (second_r >= 0) & (r_level[np.maximum(second_r, 0)] == r_level[np.maximum(best_ref, 0)])
-    good = (best_ref >= 0) & (best_d <= max_hamming) & ~ambiguous
-    qsel = np.flatnonzero(good)
-    rsel = best_ref[qsel]
-    dsel = best_d[qsel]
+        level = r_level[order]
+        ambiguous &= (second_r >= 0) & (level[np.maximum(second_r, 0)] == level[np.maximum(best_ref, 0)])
+    good = np.flatnonzero((best_ref >= 0) & (best_d <= max_hamming) & ~ambiguous)
+    qsel = sel[good]
+    rsel = order[best_ref[good]]
+    dsel = best_d[good]
     keep = unique_by_reference(qsel, rsel, dsel)
     return qsel[keep], rsel[keep], dsel[keep]
 
