@@ -254,7 +254,8 @@ def _column_range(uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _grouped_grid(q_uv: np.ndarray, r_uv: np.ndarray, r_group: np.ndarray, cells: np.ndarray):
     """The cell keys of ``grid_pairs_grouped``: (cells, grid origin, columns per group, cells per
-    group, each group's key offset, the references' keys)."""
+    group, each group's key of the origin's cell, the references' keys). A group's grid has one empty
+    row and column on each side of its points' cells, so every query's 3 x 3 cells are inside it."""
     cells = np.maximum(np.asarray(cells, float), 1.0)
     q_lo, q_hi = _column_range(q_uv)
     r_lo, r_hi = _column_range(r_uv)
@@ -263,10 +264,10 @@ def _grouped_grid(q_uv: np.ndarray, r_uv: np.ndarray, r_group: np.ndarray, cells
     n_cols = (span[0] // cells).astype(np.int64) + 3
     n_rows = (span[1] // cells).astype(np.int64) + 3
     sizes = n_cols * n_rows
-    offset = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    origin = np.cumsum(sizes) - sizes + n_cols + 1        # group g's cell (row 1, column 1)
     rc = floor_divide(r_uv - lo_uv, cells[r_group][:, None]).astype(np.int64)
-    rkey = offset[r_group] + rc[:, 1] * n_cols[r_group] + rc[:, 0]
-    return cells, lo_uv, n_cols, sizes, offset, rkey
+    rkey = origin[r_group] + rc[:, 1] * n_cols[r_group] + rc[:, 0]
+    return cells, lo_uv, n_cols, sizes, origin, rkey
 
 
 def grid_rank(q_uv: np.ndarray, r_uv: np.ndarray, r_group: np.ndarray, cells: np.ndarray) -> np.ndarray:
@@ -282,17 +283,18 @@ def grid_rank(q_uv: np.ndarray, r_uv: np.ndarray, r_group: np.ndarray, cells: np
 def _grid_ranges(q_uv: np.ndarray, r_uv: np.ndarray, r_group: np.ndarray, cells: np.ndarray):
     """The references' cell order and, per query, its 3 x n_groups ranges of positions in that
     order (see ``grid_pairs_grouped``): (order, lo (Q, 3G), counts (Q, 3G))."""
-    cells, lo_uv, n_cols, sizes, offset, rkey = _grouped_grid(q_uv, r_uv, r_group, cells)
+    cells, lo_uv, n_cols, sizes, origin, rkey = _grouped_grid(q_uv, r_uv, r_group, cells)
     order = np.argsort(rkey, kind="stable")
     start = np.zeros(int(sizes.sum()) + 1, np.int64)   # start[k]: references with a key < k
     np.cumsum(np.bincount(rkey, minlength=len(start) - 1), out=start[1:])
     qc = floor_divide((q_uv - lo_uv)[:, None, :], cells[None, :, None]).astype(np.int64)    # (Q,G,2)
-    row = qc[:, :, None, 1] + np.arange(-1, 2)                                       # (Q,G,3)
-    # a query's cells lie inside its group's grid (one spare row/column each side); row -1 is empty
-    base = offset[None, :, None] + np.maximum(row, 0) * n_cols[None, :, None]
-    lo = start[base + np.maximum(qc[:, :, None, 0] - 1, 0)]
-    hi = start[base + qc[:, :, None, 0] + 2]
-    counts = np.where(row >= 0, hi - lo, 0)
+    # each query's cell key per group; its 3 x 3 cells lie inside the group's grid (the empty border),
+    # so the rows below, at and above it are the key ranges [key - 1, key + 2) moved by one row
+    key = origin + qc[:, :, 1] * n_cols + qc[:, :, 0]                                  # (Q,G)
+    first = (key - 1)[:, :, None] + np.arange(-1, 2) * n_cols[:, None]                # (Q,G,3)
+    lo = start[first]
+    counts = start[first + 3]
+    counts -= lo
     return order, lo.reshape(len(q_uv), -1), counts.reshape(len(q_uv), -1)
 
 
