@@ -201,3 +201,14 @@ def test_pairs_exactly_on_the_circle_are_inside():
     on_circle = ((q_uv[want[0]] - r_uv[want[1]]) ** 2).sum(axis=1) == 25.0
     assert on_circle.sum() > 20
     _assert_same(got, want)
+
+
+def test_searches_beyond_the_kept_scratch_size_are_exact(monkeypatch):
+    """Searches with more pairs than the per-thread buffers keep get fresh arrays, same matches."""
+    monkeypatch.setattr(matching._Scratch, "MAX_KEPT", 500)
+    for scaled in (False, True):
+        _, q_uv, q_desc, r_uv, r_desc, level, scale = _scene(50)
+        kw = dict(r_scale=scale, r_level=level) if scaled else {}
+        args = (q_uv, as_words(q_desc), np.full(len(q_uv), 8.0), r_uv, as_words(r_desc), 60, 0.95)
+        _assert_same(match_in_window(*args, **kw),
+                     plain_match_in_window(q_uv, q_desc, np.full(len(q_uv), 8.0), r_uv, r_desc, 60, 0.95, **kw))

@@ -38,11 +38,16 @@ class _Scratch(threading.local):
     per thread, as other threads (the stereo worker, loop closing) match at the same time; nothing
     returned ever points into them."""
 
+    # pairs kept for reuse at most (~20 MB a thread); larger searches (loop closing's) allocate
+    MAX_KEPT = 1 << 18
+
     def get(self, name: str, n: int, dtype, width: int = 0) -> np.ndarray:
+        row = (width,) if width else ()
+        if n > self.MAX_KEPT:
+            return np.empty((n,) + row, dtype)
         buf = self.__dict__.get(name)
-        if buf is None or len(buf) < n or buf.dtype != dtype or buf.shape[1:] != ((width,) if width else ()):
-            shape = (n + n // 4 + 1024,) + ((width,) if width else ())   # room to grow a little
-            buf = np.empty(shape, dtype)
+        if buf is None or len(buf) < n or buf.dtype != dtype or buf.shape[1:] != row:
+            buf = np.empty((min(n + n // 4 + 1024, self.MAX_KEPT),) + row, dtype)   # room to grow a little
             self.__dict__[name] = buf
         return buf[:n]
 
