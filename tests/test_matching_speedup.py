@@ -212,3 +212,18 @@ def test_searches_beyond_the_kept_scratch_size_are_exact(monkeypatch):
         args = (q_uv, as_words(q_desc), np.full(len(q_uv), 8.0), r_uv, as_words(r_desc), 60, 0.95)
         _assert_same(match_in_window(*args, **kw),
                      plain_match_in_window(q_uv, q_desc, np.full(len(q_uv), 8.0), r_uv, r_desc, 60, 0.95, **kw))
+
+
+@pytest.mark.parametrize("size", [(300.0, 120.0), (3000.0, 1000.0)])
+def test_grids_below_and_above_2_16_cells(size):
+    """The references' cell order by a 16-bit radix sort (small grids) or int64 (large ones, here
+    ~2 * 10^5 cells of 4 px): both give the dense reference's matches."""
+    _, q_uv, q_desc, r_uv, r_desc, level, scale = _scene(60, n_q=400, n_r=1500, size=size)
+    for kw in ({}, dict(r_scale=scale, r_level=level)):
+        args = (q_uv, as_words(q_desc), np.full(len(q_uv), 4.0), r_uv, as_words(r_desc), 60, 0.95)
+        _assert_same(match_in_window(*args, **kw),
+                     plain_match_in_window(q_uv, q_desc, np.full(len(q_uv), 4.0), r_uv, r_desc, 60, 0.95, **kw))
+    keys = np.random.default_rng(61).integers(0, 70000, 3000)
+    for n_keys in (70000, 1 << 16):
+        k = keys % n_keys
+        np.testing.assert_array_equal(matching._stable_order(k, n_keys), np.argsort(k, kind="stable"))

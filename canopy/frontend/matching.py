@@ -279,17 +279,26 @@ def grid_rank(q_uv: np.ndarray, r_uv: np.ndarray, r_group: np.ndarray, cells: np
     """Each reference's rank in the order ``grid_pairs_grouped`` lists one query's pairs in (by
     cell key, then reference index): with it as ``best_two``'s ``tie_rank``, any superset of that
     function's pairs, grouped by query, resolves equal distances as its pairs would."""
-    rkey = _grouped_grid(q_uv, r_uv, r_group, cells)[-1]
+    _, _, _, sizes, _, rkey = _grouped_grid(q_uv, r_uv, r_group, cells)
     rank = np.empty(len(rkey), np.int64)
-    rank[np.argsort(rkey, kind="stable")] = np.arange(len(rkey))
+    rank[_stable_order(rkey, int(sizes.sum()))] = np.arange(len(rkey))
     return rank
+
+
+def _stable_order(keys: np.ndarray, n_keys: int) -> np.ndarray:
+    """``np.argsort(keys, kind="stable")`` of keys in [0, n_keys): the same permutation, and with
+    fewer than 2^16 keys a radix sort (numpy's stable sort of 16-bit integers), ~4x cheaper than
+    its timsort of int64 for the ~10^3 keypoints of a frame."""
+    if n_keys <= 1 << 16:
+        keys = keys.astype(np.uint16)
+    return np.argsort(keys, kind="stable")
 
 
 def _grid_ranges(q_uv: np.ndarray, r_uv: np.ndarray, r_group: np.ndarray, cells: np.ndarray):
     """The references' cell order and, per query, its 3 x n_groups ranges of positions in that
     order (see ``grid_pairs_grouped``): (order, lo (Q, 3G), counts (Q, 3G))."""
     cells, lo_uv, n_cols, sizes, origin, rkey = _grouped_grid(q_uv, r_uv, r_group, cells)
-    order = np.argsort(rkey, kind="stable")
+    order = _stable_order(rkey, int(sizes.sum()))
     start = np.zeros(int(sizes.sum()) + 1, np.int64)   # start[k]: references with a key < k
     np.cumsum(np.bincount(rkey, minlength=len(start) - 1), out=start[1:])
     qc = floor_divide((q_uv - lo_uv)[:, None, :], cells[None, :, None]).astype(np.int64)    # (Q,G,2)
@@ -326,7 +335,7 @@ def _steps_cumsum(out: np.ndarray, at: np.ndarray, jumps: np.ndarray, step: int)
 def _range_pairs_scratch(lo: np.ndarray, counts: np.ndarray, total: int):
     """``_range_pairs``' (query, position) arrays, in ``_SCRATCH`` (``total`` > 0 pairs)."""
     c = counts.reshape(-1)
-    nz = np.flatnonzero(c)
+    nz = np.flatnonzero(c != 0)                      # (of a bool array: ~2x cheaper than of ints)
     c_nz, lo_nz = c[nz], lo.reshape(-1)[nz]
     first = np.cumsum(c_nz) - c_nz                   # each non-empty range's first pair
     jump = np.empty(len(nz), np.int64)               # its first position minus the last one before
