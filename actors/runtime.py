@@ -212,6 +212,29 @@ def _load_factory(path: str):
     return getattr(importlib.import_module(module), cls)
 
 
+# mallopt parameters (glibc malloc.h)
+_M_TRIM_THRESHOLD = -1
+_M_MMAP_THRESHOLD = -3
+
+
+def keep_freed_memory(mb: int) -> bool:
+    """Keep freed heap blocks up to ``mb`` MB in this process (glibc ``mallopt``): allocations below
+    that come from the heap, not from a fresh ``mmap``, and the heap's top is trimmed only past 4x
+    that, so a frame's temporaries reuse pages that are already mapped instead of faulting them in.
+    The fixed thresholds also stop glibc's dynamic ones from moving. False where the C library is not
+    glibc (the call is then a no-op) or ``mb`` is 0."""
+    if mb <= 0 or not sys.platform.startswith("linux"):
+        return False
+    import ctypes
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):   # musl and others: no mallopt
+        return False
+    size = int(mb) << 20
+    return bool(mallopt(_M_MMAP_THRESHOLD, size)) and bool(mallopt(_M_TRIM_THRESHOLD, 4 * size))
+
+
 def actor_main(spec: ActorSpec) -> None:
     """Entry point of an actor process."""
     # Ctrl-C reaches the whole process group; only the supervisor decides.
@@ -226,6 +249,8 @@ def actor_main(spec: ActorSpec) -> None:
     current_index = -1
     try:
         ctx = ActorContext(spec, zctx)
+        ctx.extra["malloc_keep_mb"] = int(spec.config.get("malloc_keep_mb", 0)) \
+            if keep_freed_memory(int(spec.config.get("malloc_keep_mb", 0))) else 0
         if int(spec.config.get("niceness", 0)) > 0:  # a lower CPU priority (runtime.*_niceness)
             os.nice(int(spec.config["niceness"]))
         ctx.extra["niceness"] = os.nice(0)  # as the process runs (stats.json), whatever set it

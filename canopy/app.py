@@ -76,7 +76,7 @@ def build_actor_specs(run_dir: str, cfg, dataset: str, path: str | None, max_fra
     rt = cfg.runtime
     # In realtime a frame older than max_lag_frames periods is skipped when a newer one waits.
     common = {"clock": rt.clock, "frame_period_s": 1.0 / (frame_rate_hz * rt.realtime_speed),
-              "max_lag_frames": rt.max_lag_frames}
+              "max_lag_frames": rt.max_lag_frames, "malloc_keep_mb": rt.malloc_keep_mb}
 
     def spec(name, factory, config, outputs):
         return ActorSpec(name=name, factory=factory, config={**common, **config}, inbox=ep[name][0],

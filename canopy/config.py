@@ -21,6 +21,8 @@ MIN_RING_SLOTS, MAX_RING_SLOTS = 2, 256
 # two periods would call a healthy actor hung on one late message.
 MIN_HEARTBEAT_TIMEOUT_S = 2.0
 SENSORS = ("stereo", "mono")
+# glibc refuses an M_MMAP_THRESHOLD above HEAP_MAX_SIZE / 2 (32 MB on 64-bit)
+MAX_MALLOC_KEEP_MB = 32
 MAX_MAP_UPDATE_LAG = 4  # tracking further ahead of its map than this only loses accuracy
 
 
@@ -56,6 +58,12 @@ class RuntimeParams:
     # niceness of local mapping (0: as tracking). configs/euroc.yaml: 5, where its per-frame BA cost made
     # tracking wait for a core; lockstep results do not depend on it (map updates land at fixed frames)
     mapping_niceness: int = 0
+    # glibc's malloc in every actor process (actors.runtime.keep_freed_memory): freed blocks up to this
+    # many MB stay in the process instead of going back to the kernel (M_MMAP_THRESHOLD, and
+    # M_TRIM_THRESHOLD at 4x), so the per-frame temporaries of numpy/OpenCV do not page-fault in again
+    # every frame (~2.5 us a fault, hundreds a frame on EuRoC: docs/notes/s19-mapsearch.md). 0: glibc's
+    # own dynamic thresholds.
+    malloc_keep_mb: int = 0
     seed: int = 0
     sensor: str = "stereo"           # stereo | mono (the left image only; canopy.mono)
 
@@ -87,6 +95,8 @@ class RuntimeParams:
             raise ConfigError("runtime.feeder_niceness", f"must be 0..19, got {self.feeder_niceness}")
         if not 0 <= self.mapping_niceness <= 19:
             raise ConfigError("runtime.mapping_niceness", f"must be 0..19, got {self.mapping_niceness}")
+        if not 0 <= self.malloc_keep_mb <= MAX_MALLOC_KEEP_MB:
+            raise ConfigError("runtime.malloc_keep_mb", f"must be 0..{MAX_MALLOC_KEEP_MB}, got {self.malloc_keep_mb}")
         if not 0 <= self.grace_s < float("inf"):
             raise ConfigError("runtime.grace_s", f"must be a finite number >= 0, got {self.grace_s}")
 
