@@ -36,12 +36,13 @@ class LocalBundleAdjustmentMixin:
             self._noise_cache[key] = m
         return m
 
-    def _bundle_adjust(self, local: list[int], fixed: list[int], scale: float) -> None:
-        """Minimise AGRI Eq. 11 (point terms, Eq. 9) over the local keyframes and their landmarks."""
+    def _bundle_adjust(self, local: list[int], fixed: list[int], scale: float, table=None) -> None:
+        """Minimise AGRI Eq. 11 (point terms, Eq. 9) over the local keyframes and their landmarks.
+        ``table``: the step's ``map_store.ObservationTable``, current (observations unchanged since read)."""
         p = self.params
         kf_set = set(local) | set(fixed)
         # edges: (kf, landmark, keypoint)
-        lm_ids, e_kf, e_lm, e_kp = self._observation_edges(local, kf_set)
+        lm_ids, e_kf, e_lm, e_kp = self._observation_edges(local, kf_set, table)
         lines = self._line_edges(local, kf_set) if p.use_lines else None
         if not lm_ids and (lines is None or len(lines[0]) == 0):
             return

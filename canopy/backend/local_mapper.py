@@ -16,7 +16,6 @@ Where things are:
 from __future__ import annotations
 
 import time
-from itertools import chain
 from operator import attrgetter
 
 import gtsam
@@ -24,11 +23,11 @@ import numpy as np
 
 from canopy.backend.keyframe_culling import cull_redundant_keyframes
 from canopy.backend.local_ba import LocalBundleAdjustmentMixin
-from canopy.backend.map_store import Keyframe, Landmark, LandmarkStore, LineLandmark, MapStoreAccess, _sorted_unique_ids, \
-    local_map_update
+from canopy.backend.map_store import Keyframe, Landmark, LandmarkStore, LineLandmark, MapStoreAccess, ObservationTable, \
+    _sorted_unique_ids, local_map_update
 from canopy.backend.params import MappingParams
 from canopy.backend import point_confirmation as confirmation
-from canopy.backend.still_window import bounded_fixed, descriptor_observations, window_neighbours
+from canopy.backend.still_window import bounded_fixed, window_neighbours
 from canopy.backend.triangulation import check_tracker_ids, pair_gates, triangulate_with_partners, \
     triangulation_partners
 from canopy.frontend.matching import as_words, _popcount64
@@ -40,7 +39,6 @@ from shared.types import StereoCalibration
 __all__ = ["Keyframe", "Landmark", "LineLandmark", "LocalMapper"]
 
 
-_OBS = attrgetter("obs")
 _ID = attrgetter("id")
 
 
@@ -95,6 +93,7 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         # keyframes at either end of a closed loop: never culled (ORB-SLAM's SetNotErase on the loop's
         # two keyframes, LoopClosing::ComputeSim3 / KeyFrame::AddLoopEdge)
         self.loop_keyframes: set[int] = set()
+        self._insert_table: ObservationTable | None = None   # _insert's, taken by insert_keyframe
 
     # ----------------------------------------------------------------- public API
     def insert_keyframe(self, kf: KeyframeData) -> LocalMapUpdate:
@@ -102,13 +101,17 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         t_all = time.perf_counter()
         t0 = time.perf_counter()
         rec = self._insert(kf)
+        # the observations of rec's landmarks as insertion left them (map_store.ObservationTable): read
+        # once for the descriptors, covisibility, the window and BA's edges; nothing changes them in between
+        table, self._insert_table = self._insert_table, None
         timings["insert"] = _ms(t0)
         if self.params.triangulate_new_points:
             t0 = time.perf_counter()
             self._triangulate_new_points(rec, kf.scale_factor)
+            table = None   # new landmarks and fused observations: read afresh
             timings["triangulate"] = _ms(t0)
         t0 = time.perf_counter()
-        local, fixed = self._local_window(rec)
+        local, fixed = self._local_window(rec, table)
         self.last_window = (local, fixed)  # for diagnosis (benchmarks/diagnose_drift.py)
         timings["window"] = _ms(t0)
         t0 = time.perf_counter()
@@ -121,16 +124,18 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
                 # mapping.triangulate_confirm_ba off: the unconfirmed triangulated landmarks sit out BA
                 with confirmation.hidden_from_ba(self, confirmation.pending_ids(
                         self.landmarks, p.triangulate_id_base, p.triangulate_min_observations, rec.segment)):
-                    self._bundle_adjust(local, ba_fixed, kf.scale_factor)
+                    self._bundle_adjust(local, ba_fixed, kf.scale_factor, table)
             else:
-                self._bundle_adjust(local, ba_fixed, kf.scale_factor)
+                self._bundle_adjust(local, ba_fixed, kf.scale_factor, table)
         timings["ba"] = _ms(t0)
         t0 = time.perf_counter()
         self._cull(rec)
         timings["cull"] = _ms(t0)
         if self.params.keyframe_culling:  # ORB-SLAM's KeyFrameCulling, after local BA as there
             t0 = time.perf_counter()
-            if cull_redundant_keyframes(self, rec, self._covisible(rec)):
+            # BA's outliers and landmark culling changed observations: a new table, kept current by culling
+            table = ObservationTable(self.landmarks, rec.landmark[rec.landmark >= 0])
+            if cull_redundant_keyframes(self, rec, self._covisible(rec, table), table):
                 local = [k for k in local if k in self.keyframes]
                 fixed = [k for k in fixed if k in self.keyframes]
             timings["kfcull"] = _ms(t0)
@@ -196,7 +201,8 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
                                 for i, lid in zip(idx.tolist(), np.asarray(kf.new_landmark_ids)[idx].tolist())],
                                Pw, rec.descriptors[idx])
         rec.landmark[idx] = np.asarray(kf.new_landmark_ids)[idx]
-        self._update_descriptors(touched)
+        self._insert_table = ObservationTable(self.landmarks, rec.landmark[rec.landmark >= 0])
+        self._update_descriptors(touched, self._insert_table)
         if self.params.use_lines:
             self._insert_lines(kf, rec)
         return rec
@@ -263,52 +269,60 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
                                            first_order=rec.order, segment=self._segment)
             rec.line_landmark[i] = lid
 
-    def _update_descriptors(self, landmarks: list[Landmark]) -> None:
+    def _update_descriptors(self, landmarks: list[Landmark], table: ObservationTable | None = None) -> None:
         """ORB-SLAM's distinctive descriptor: the observation with the least median distance to
-        the others. Batched over landmarks with the same number of observations."""
-        by_count: dict[int, list[Landmark]] = {}
-        m = self.params.descriptor_max_observations   # 0: every observation (ORB-SLAM's)
-        obs_of = {}
-        for lm in landmarks:
-            if len(lm.obs) >= 3:
-                by_count.setdefault(min(len(lm.obs), m) if m else len(lm.obs), []).append(lm)
-                if m and len(lm.obs) > m:
-                    obs_of[lm.id] = descriptor_observations(lm.obs, m)
-        if not by_count:
+        the others. Batched over landmarks with the same number of observations. ``table``: the
+        observations of (at least) these landmarks, current (read here when None)."""
+        ids = np.fromiter(map(_ID, landmarks), np.int64, len(landmarks))
+        if table is None:
+            table = ObservationTable(self.landmarks, ids)
+        g = table.groups(ids)
+        n_all = table.count[g]
+        g = g[n_all >= 3]
+        if len(g) == 0:
             return
-        obs_for = (lambda lm: obs_of.get(lm.id, lm.obs)) if obs_of else _OBS
+        n_all = table.count[g]
+        m = self.params.descriptor_max_observations   # 0: every observation (ORB-SLAM's)
+        n_used = np.minimum(n_all, m) if m else n_all
+        # each landmark's last n_used observations (still_window.descriptor_observations: the newest m)
+        skip = n_all - n_used
         # every observation's descriptor by one gather from the observing keyframes' descriptor
-        # arrays laid end to end (np.array over nested lists of 32-byte rows cost ~2 ms per KITTI keyframe)
-        # the observations' keyframes and keypoint rows chained at C level (a generator per
-        # observation cost ~1 ms per KITTI keyframe), the keyframes' offsets by a lookup table
-        kf_ids = sorted(set(chain.from_iterable(map(obs_for, chain.from_iterable(by_count.values())))))
-        table = np.concatenate([self.keyframes[k].descriptors for k in kf_ids])
+        # arrays laid end to end, the keyframes' offsets by a lookup table (np.array over nested
+        # lists of 32-byte rows cost ~2 ms per KITTI keyframe)
+        kf_ids = _sorted_unique_ids(table.kf[table.rows(g)]).tolist()
+        desc_table = np.concatenate([self.keyframes[k].descriptors for k in kf_ids])
         start = np.cumsum([0] + [len(self.keyframes[k].descriptors) for k in kf_ids[:-1]])
         row_of_kf = np.zeros(kf_ids[-1] + 1, np.int64)
         row_of_kf[kf_ids] = start
-        for n, group in by_count.items():
-            obs = list(map(obs_for, group))
-            rows = row_of_kf[np.fromiter(chain.from_iterable(obs), np.int64, len(group) * n)] + \
-                np.fromiter(chain.from_iterable(map(dict.values, obs)), np.int64, len(group) * n)
-            desc = table[rows].reshape(len(group), n, 32)
+        store_rows = self.landmarks.rows
+        # landmarks grouped by their number of observations (a group's result does not depend on
+        # which landmarks share it: the index is computed per landmark)
+        for n in np.unique(n_used).tolist():
+            sel = np.flatnonzero(n_used == n)
+            r = (table.start[g[sel]] + skip[sel])[:, None] + np.arange(n)
+            desc = desc_table[row_of_kf[table.kf[r]] + table.kp[r]]
             best = distinctive_index(desc)
-            chosen = desc[np.arange(len(group)), best]
-            rows = self.landmarks.rows
-            if rows is not None:   # one scatter into the store's descriptor rows
-                rows.desc[np.fromiter(map(_ID, group), np.int64, len(group))] = chosen
+            chosen = desc[np.arange(len(sel)), best]
+            lids = table.ids[g[sel]]
+            if store_rows is not None:   # one scatter into the store's descriptor rows
+                store_rows.desc[lids] = chosen
             else:
-                for lm, d in zip(group, chosen):
-                    lm.descriptor = d.copy()
+                for lid, d in zip(lids.tolist(), chosen):
+                    self.landmarks[lid].descriptor = d.copy()
 
     # ----------------------------------------------------------------- covisibility window
-    def _covisible(self, rec: Keyframe) -> dict[int, int]:
+    def _covisible(self, rec: Keyframe, table: ObservationTable | None = None) -> dict[int, int]:
         """Keyframe index -> landmarks it shares with ``rec`` (every reader orders the keyframes by
-        (count, index), so the dict's order is free: ascending here)."""
-        # the observing keyframes of all of rec's landmarks chained at C level into one array and counted
-        # by np.bincount (map over the store's __getitem__: no Python frame per landmark; a Counter over
-        # the chain cost ~0.9 ms per EuRoC keyframe with ~20 observers per landmark, this ~0.55)
-        obs = list(map(_OBS, map(self.landmarks.__getitem__, rec.landmark[rec.landmark >= 0].tolist())))
-        keys = np.fromiter(chain.from_iterable(obs), np.int64, sum(map(len, obs)))
+        (count, index), so the dict's order is free: ascending here). ``table``: current observations
+        of (at least) rec's landmarks (read here when None)."""
+        # the observing keyframes of all of rec's landmarks in one array, counted by np.bincount (a
+        # Counter over the chained dicts cost ~0.9 ms per EuRoC keyframe with ~20 observers per landmark)
+        ids = rec.landmark[rec.landmark >= 0]
+        if table is None:
+            table = ObservationTable(self.landmarks, ids)
+        else:
+            table.add(ids)
+        keys = table.of(ids)[0]
         per_kf = np.bincount(keys) if len(keys) else np.zeros(0, np.int64)
         seen = np.flatnonzero(per_kf)
         counts = dict(zip(seen.tolist(), per_kf[seen].tolist()))
@@ -320,21 +334,24 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
                         counts[k] = counts.get(k, 0) + 1
         return counts
 
-    def _local_window(self, rec: Keyframe) -> tuple[list[int], list[int]]:
+    def _local_window(self, rec: Keyframe, table: ObservationTable | None = None) -> tuple[list[int], list[int]]:
         """Current keyframe + its strongest covisible neighbours (local, optimised) and the
-        other keyframes seeing their landmarks (fixed), as ORB-SLAM's LocalBundleAdjustment."""
+        other keyframes seeing their landmarks (fixed), as ORB-SLAM's LocalBundleAdjustment.
+        ``table``: current observations of rec's landmarks; the window's others are added to it."""
         p = self.params
-        counts = self._covisible(rec)
+        if table is None:
+            table = ObservationTable(self.landmarks)
+        counts = self._covisible(rec, table)
         neigh = [k for k, c in counts.items() if c >= p.covisibility_min_shared
                  and self.keyframes[k].segment == rec.segment]
         neigh.sort(key=lambda k: (-counts[k], -k))
         local = [rec.index] + window_neighbours(self, rec, neigh)  # neigh[:window_size - 1] unless still_window's option
         local_set = set(local)
-        # the local keyframes' landmarks by one presence table, their observers chained into one array
-        # and made distinct there (sets built element by element cost ~1 ms per KITTI keyframe)
-        seen = _sorted_unique_ids(np.concatenate([self.keyframes[k].landmark for k in local])).tolist()
-        obs = list(map(_OBS, map(self.landmarks.__getitem__, seen)))
-        observers = np.fromiter(chain.from_iterable(obs), np.int64, sum(map(len, obs)))
+        # the local keyframes' landmarks by one presence table, their observers from the table and made
+        # distinct there (sets built element by element cost ~1 ms per KITTI keyframe)
+        seen = _sorted_unique_ids(np.concatenate([self.keyframes[k].landmark for k in local]))
+        table.add(seen)
+        observers = table.of(seen)[0]
         fixed_set = set(_sorted_unique_ids(observers).tolist()) - local_set
         first = self._segment_first[rec.segment]
         if first in local_set and len(local) > 1:  # the segment's first keyframe fixes the gauge

@@ -213,6 +213,83 @@ def _sorted_unique_ids(ids: np.ndarray) -> np.ndarray:
     return np.flatnonzero(present).astype(np.int64)
 
 
+class ObservationTable:
+    """The observations (keyframe, keypoint row) of a set of landmarks as arrays, read from their
+    ``obs`` dicts once and then selected, counted and grouped by gathers (issue 8).
+
+    Why: one keyframe's steps read the same landmarks' observations several times with no change
+    in between: the distinctive descriptors and the covisibility counts (the new keyframe's
+    landmarks), the window's fixed set and local BA's edges (the window's landmarks). Each step
+    chained the dicts again (``np.fromiter`` over ~10^5 dict entries per EuRoC hover keyframe,
+    ~5 ms); the table chains each landmark once. Each landmark's rows are contiguous (a group) and
+    in its dict's (insertion) order, so a selection gives the same arrays as chaining the dicts.
+
+    The table is a snapshot: whoever changes observations while it is in use says so
+    (``drop_keyframe`` for keyframe culling) or builds a new one; ``LocalMapper.insert_keyframe``
+    uses one from its insertion to local BA's edges and one for keyframe culling."""
+
+    def __init__(self, landmarks, ids=()):
+        self._landmarks = landmarks
+        self.ids = np.zeros(0, np.int64)     # landmark of each group
+        self.start = np.zeros(0, np.int64)   # its first row
+        self.count = np.zeros(0, np.int64)   # its rows
+        self.kf = np.zeros(0, np.int64)
+        self.kp = np.zeros(0, np.int64)
+        self._order = self._sorted = np.zeros(0, np.int64)   # ids sorted, for lookups
+        self.add(ids)
+
+    def contains(self, ids) -> np.ndarray:
+        ids = np.asarray(ids, np.int64)
+        if len(self._sorted) == 0:
+            return np.zeros(len(ids), bool)
+        pos = np.minimum(np.searchsorted(self._sorted, ids), len(self._sorted) - 1)
+        return self._sorted[pos] == ids
+
+    def add(self, ids) -> None:
+        """Chain the observations of landmarks ``ids`` (in the store) not in the table yet."""
+        ids = np.asarray(ids, np.int64)
+        ids = unique_sorted(ids[~self.contains(ids)]) if len(self.ids) else unique_sorted(ids)
+        if len(ids) == 0:
+            return
+        obs = list(map(_OBS, map(self._landmarks.__getitem__, ids.tolist())))
+        n = np.fromiter(map(len, obs), np.int64, len(obs))
+        total = int(n.sum())
+        kf = np.fromiter(chain.from_iterable(obs), np.int64, total)
+        kp = np.fromiter(chain.from_iterable(map(dict.values, obs)), np.int64, total)
+        self.start = np.concatenate([self.start, len(self.kf) + np.cumsum(n) - n])
+        self.count = np.concatenate([self.count, n])
+        self.ids = np.concatenate([self.ids, ids])
+        self.kf, self.kp = np.concatenate([self.kf, kf]), np.concatenate([self.kp, kp])
+        self._order = np.argsort(self.ids, kind="stable")
+        self._sorted = self.ids[self._order]
+
+    def groups(self, ids) -> np.ndarray:
+        """Group index of each of ``ids`` (every one in the table)."""
+        return self._order[np.searchsorted(self._sorted, np.asarray(ids, np.int64))]
+
+    def rows(self, groups) -> np.ndarray:
+        """The rows of ``groups`` laid end to end in that order, each group's in its dict order."""
+        n = self.count[groups]
+        return np.arange(int(n.sum())) + np.repeat(self.start[groups] - (np.cumsum(n) - n), n)
+
+    def of(self, ids):
+        """(keyframes, keypoint rows, observations per landmark) of landmarks ``ids`` in that order:
+        what chaining their ``obs`` dicts gives."""
+        g = self.groups(ids)
+        r = self.rows(g)
+        return self.kf[r], self.kp[r], self.count[g]
+
+    def drop_keyframe(self, k: int) -> None:
+        """Keyframe ``k``'s observations left the landmarks (``keyframe_culling.cull_keyframe``)."""
+        dead = self.kf == k
+        if not dead.any():
+            return
+        group = np.repeat(np.arange(len(self.ids)), self.count)
+        self.count = self.count - np.bincount(group[dead], minlength=len(self.ids))
+        self.kf, self.kp = self.kf[~dead], self.kp[~dead]
+        self.start = np.cumsum(self.count) - self.count
+
+
 def local_map_update(index: int, keyframes: dict, landmarks: dict, local: list[int], fixed: list[int]):
     """The local map tracking needs after keyframe ``index``: the landmarks seen by the local and
     fixed keyframes (ids, positions, descriptors) and the refined poses of the local ones. Shared
@@ -282,20 +359,22 @@ class MapStoreAccess:
                 lm.visible += vis
                 lm.found += fnd
 
-    def _observation_edges(self, local: list[int], kf_set: set[int]):
+    def _observation_edges(self, local: list[int], kf_set: set[int], table: ObservationTable | None = None):
         """Local BA's point edges: the landmarks the ``local`` keyframes observe (sorted ids) and
         every observation of them by a keyframe of ``kf_set``, as arrays (keyframe, landmark,
-        keypoint row). Returns (lm_ids, e_kf, e_lm, e_kp)."""
+        keypoint row). ``table``: the step's observations where nothing changed them since it was
+        read. Returns (lm_ids, e_kf, e_lm, e_kp)."""
         seen = [self.keyframes[k].landmark for k in local]
         lm_arr = _sorted_unique_ids(np.concatenate(seen)) if seen else np.zeros(0, np.int64)
         lm_ids = lm_arr.tolist()
-        # every landmark's observations in their dict order, keys and values chained at C level,
-        # then the window's by a lookup table (a generator over ~7 k edges cost ~3 ms per KITTI keyframe)
-        obs = list(map(_OBS, map(self.landmarks.__getitem__, lm_ids)))
-        n_obs = np.fromiter(map(len, obs), np.int64, len(obs))
-        total = int(n_obs.sum())
-        e_kf = np.fromiter(chain.from_iterable(obs), np.int64, total)
-        e_kp = np.fromiter(chain.from_iterable(map(dict.values, obs)), np.int64, total)
+        # every landmark's observations in their dict order from the step's table (the window read
+        # them already: LocalMapper._local_window) or chained here, then the window's by a lookup table
+        if table is None:
+            table = ObservationTable(self.landmarks, lm_arr)
+        else:
+            table.add(lm_arr)
+        e_kf, e_kp, n_obs = table.of(lm_arr)
+        total = len(e_kf)
         e_lm = np.repeat(lm_arr, n_obs)
         if total == 0 or not kf_set:
             keep = np.zeros(total, bool)
