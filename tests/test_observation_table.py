@@ -10,7 +10,8 @@ import pytest
 
 from canopy.backend import MappingParams
 from canopy.backend.keyframe_culling import cull_keyframe, cull_redundant_keyframes, redundant_fraction
-from canopy.backend.map_store import Landmark, LandmarkStore, ObservationTable
+from canopy.backend.map_store import Landmark, LandmarkStore
+from canopy.backend.observations import ObservationTable
 from tests.test_keyframe_culling import _consistent, _still_run
 
 
@@ -131,3 +132,77 @@ def test_culling_with_one_shared_table_culls_as_the_dicts_say():
     assert all(shared.culled_keyframes[k][0] == fresh.culled_keyframes[k][0] for k in culled)
     assert {i: lm.obs for i, lm in shared.landmarks.items()} == {i: lm.obs for i, lm in fresh.landmarks.items()}
     _consistent(shared)
+
+
+def _stored_vs_dicts(store: LandmarkStore, ids):
+    st = store.observations
+    assert st is not None
+    for got, want in zip(st.of(ids), _chained(store, list(ids))):
+        np.testing.assert_array_equal(got, want)
+
+
+def test_the_store_follows_every_kind_of_change_of_the_dicts():
+    """ObservationStore mirrors the dicts through ObsDict's hooks (one by one), the bulk paths
+    (append, drop_keyframe) and the LandmarkStore's own changes (insertion, removal, reassignment)."""
+    rng = np.random.default_rng(11)
+    store = _random_store(rng, n_lm=80, n_kf=15)
+    ids = np.arange(80)
+    _stored_vs_dicts(store, ids)
+    for step in range(300):
+        lm = store[int(rng.integers(0, 80))]
+        k = int(rng.integers(0, 15))
+        op = step % 8
+        if op == 0:
+            lm.obs[k] = int(rng.integers(0, 500))          # new key last, or overwritten in place
+        elif op == 1:
+            lm.obs.pop(k, None)
+        elif op == 2 and k in lm.obs:
+            del lm.obs[k]
+        elif op == 3:
+            lm.obs.update({k: 7, (k + 1) % 15: 8})
+        elif op == 4 and lm.obs:
+            lm.obs.popitem()
+        elif op == 5:
+            lm.obs.setdefault(k, 3)
+        elif op == 6:   # a loop's merge assigns a new dict
+            lm.obs = {k: 1, (k + 3) % 15: 2} if step % 3 else {}
+        else:
+            lm.obs.clear()
+        _stored_vs_dicts(store, rng.permutation(80))
+    # the mapper's bulk paths: a keyframe's observations appended, a keyframe culled
+    fresh = [i for i in range(80) if 20 not in store[i].obs][:30]
+    for i, lid in enumerate(fresh):
+        dict.__setitem__(store[lid].obs, 20, 100 + i)
+    store.observations.append(np.array(fresh), 20, 100 + np.arange(len(fresh)))
+    _stored_vs_dicts(store, ids)
+    had = [i for i in range(80) if 3 in store[i].obs]
+    for lid in had:
+        dict.pop(store[lid].obs, 3)
+    store.observations.drop_keyframe(3, had)
+    _stored_vs_dicts(store, ids)
+    # a landmark removed is no longer mirrored; one stored again under its id is read afresh
+    gone = store.pop(5)
+    gone.obs[14] = 1
+    del store[6]
+    store[5] = Landmark(5, np.zeros(3), np.zeros(32, np.uint8), {9: 9, 2: 2})
+    _stored_vs_dicts(store, [i for i in range(80) if i != 6])
+    # pickled and copied as plain dicts
+    import copy
+    import pickle
+    assert pickle.loads(pickle.dumps(store[5])).obs == {9: 9, 2: 2}
+    assert type(copy.copy(store[5].obs)) is dict and pickle.loads(pickle.dumps(store[5].obs)) == {9: 9, 2: 2}
+
+
+def test_sparse_ids_turn_the_store_off_and_the_readers_chain_the_dicts():
+    mapper, _ = _still_run(MappingParams(), n_kf=6, seed=2)
+    rec = mapper.keyframes[5]
+    before = mapper._covisible(rec)
+    edges = mapper._observation_edges([5, 4], {5, 4, 0})
+    assert mapper.landmarks.observations is not None
+    far = 10 ** 9
+    mapper.landmarks[far] = Landmark(far, np.zeros(3), np.zeros(32, np.uint8), {0: 0})
+    assert mapper.landmarks.observations is None                      # off for good
+    del mapper.landmarks[far]
+    assert mapper._covisible(rec) == before
+    for got, want in zip(mapper._observation_edges([5, 4], {5, 4, 0}), edges):
+        np.testing.assert_array_equal(np.asarray(got), np.asarray(want))

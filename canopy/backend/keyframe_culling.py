@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from canopy.backend.map_store import ObservationTable
+from canopy.backend.observations import ObservationTable, observation_reader
 
 
 def redundant_fraction(mapper, k: int, min_observers: int, table: ObservationTable | None = None) -> float:
@@ -43,11 +43,7 @@ def redundant_fraction(mapper, k: int, min_observers: int, table: ObservationTab
     if len(rows) == 0:
         return 0.0
     lids = rec.landmark[rows]
-    if table is None:
-        table = ObservationTable(mapper.landmarks, lids)
-    else:
-        table.add(lids)
-    e_kf, e_kp, n_obs = table.of(lids)
+    e_kf, e_kp, n_obs = observation_reader(mapper.landmarks, lids, table).of(lids)
     # every observing keyframe's octaves laid end to end, found by an offset table
     kf_ids = np.unique(e_kf)
     table = np.concatenate([mapper.keyframes[kk].octave for kk in kf_ids.tolist()])
@@ -68,10 +64,7 @@ def cull_keyframe(mapper, k: int, table: ObservationTable | None = None) -> int:
     lids = [lid for lid in rec.landmark[rec.landmark >= 0].tolist() if lid in mapper.landmarks]
     # the other observers of its landmarks counted by np.bincount (a generator per landmark cost ~5 ms
     # per culled EuRoC keyframe, ~600 landmarks x ~20 observers); k's own count is dropped after
-    if table is None:
-        table = ObservationTable(mapper.landmarks, lids)
-    else:
-        table.add(lids)
+    table = observation_reader(mapper.landmarks, lids, table)
     per_kf = np.bincount(table.of(lids)[0]) if lids else np.zeros(0, np.int64)
     seen = np.flatnonzero(per_kf)
     shared = dict(zip(seen.tolist(), per_kf[seen].tolist()))
@@ -83,20 +76,25 @@ def cull_keyframe(mapper, k: int, table: ObservationTable | None = None) -> int:
         parent = max(kk for kk, r in mapper.keyframes.items() if kk < k and r.segment == rec.segment)
     T_parent = mapper.keyframes[parent].T_world_cam
     mapper.culled_keyframes[k] = (parent, np.linalg.inv(T_parent) @ rec.T_world_cam, rec.timestamp)
+    # k leaves its landmarks' dicts by dict's own pop and the observation arrays in one step (ObsDict's
+    # hook per observation cost ~1 us each)
+    dropped = []
     for lid in lids:
         lm = mapper.landmarks.get(lid)
         if lm is None:
             continue
-        lm.obs.pop(k, None)
-        if not lm.obs:
+        obs = lm.obs
+        if dict.pop(obs, k, None) is not None:
+            dropped.append(lid)
+        if not obs:
             del mapper.landmarks[lid]
             mapper.n_culled += 1
+    table.drop_keyframe(k, dropped)
     if rec.line_landmark is not None:
         for lid in rec.line_landmark[rec.line_landmark >= 0].tolist():
             ln = mapper.lines.get(lid)
             if ln is not None:
                 ln.obs.pop(k, None)
-    table.drop_keyframe(k)
     del mapper.keyframes[k]
     getattr(mapper, "_no_triangulation", {}).pop(k, None)
     mapper.n_keyframes_culled += 1
@@ -112,8 +110,7 @@ def cull_redundant_keyframes(mapper, rec, covisible: dict[int, int], table: Obse
     (``mapper.loop_keyframes``). ``table``: current observations (``map_store.ObservationTable``) shared
     by the candidates' tests and kept current by each culling. Returns the culled keyframes' indices."""
     p = mapper.params
-    if table is None:
-        table = ObservationTable(mapper.landmarks)
+    table = observation_reader(mapper.landmarks, (), table)
     first = mapper._segment_first[rec.segment]
     loop = getattr(mapper, "loop_keyframes", ())
     recent = {r.index for r in sorted(mapper.keyframes.values(), key=lambda r: r.order)[-p.keyframe_culling_keep_recent:]} \

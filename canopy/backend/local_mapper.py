@@ -23,8 +23,9 @@ import numpy as np
 
 from canopy.backend.keyframe_culling import cull_redundant_keyframes
 from canopy.backend.local_ba import LocalBundleAdjustmentMixin
-from canopy.backend.map_store import Keyframe, Landmark, LandmarkStore, LineLandmark, MapStoreAccess, ObservationTable, \
-    _sorted_unique_ids, local_map_update
+from canopy.backend.map_store import Keyframe, Landmark, LandmarkStore, LineLandmark, MapStoreAccess, _sorted_unique_ids, \
+    local_map_update
+from canopy.backend.observations import ObservationTable, observation_reader
 from canopy.backend.params import MappingParams
 from canopy.backend import point_confirmation as confirmation
 from canopy.backend.still_window import bounded_fixed, window_neighbours
@@ -134,7 +135,7 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         if self.params.keyframe_culling:  # ORB-SLAM's KeyFrameCulling, after local BA as there
             t0 = time.perf_counter()
             # BA's outliers and landmark culling changed observations: a new table, kept current by culling
-            table = ObservationTable(self.landmarks, rec.landmark[rec.landmark >= 0])
+            table = observation_reader(self.landmarks, rec.landmark[rec.landmark >= 0])
             if cull_redundant_keyframes(self, rec, self._covisible(rec, table), table):
                 local = [k for k in local if k in self.keyframes]
                 fixed = [k for k in fixed if k in self.keyframes]
@@ -178,18 +179,26 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         self._order += 1
         self.keyframes[kf.index] = rec
         self._add_seen_counts(kf)   # ORB-SLAM's found/visible statistics collected by tracking
-        # observations of existing landmarks
-        touched = []
+        # observations of existing landmarks: written to the dicts with dict's own method and to the
+        # store's arrays in one append (ObsDict's hook per observation cost ~1 us each)
+        touched, t_rows, t_ids = [], [], []
         seen_rows = np.flatnonzero(kf.landmark_ids >= 0)
+        get, k_new, seg, setobs = self.landmarks.get, kf.index, self._segment, dict.__setitem__
         for i, lid in zip(seen_rows.tolist(), np.asarray(kf.landmark_ids)[seen_rows].tolist()):
-            lm = self.landmarks.get(lid)
-            if lm is None or lm.segment != self._segment or kf.index in lm.obs:
+            lm = get(lid)
+            if lm is None or lm.segment != seg or k_new in lm._obs:
                 continue  # culled meanwhile, or from an older map segment
-            lm.obs[kf.index] = i
+            setobs(lm._obs, k_new, i)
             lm.visible += 1
             lm.found += 1
-            rec.landmark[i] = lid
+            t_rows.append(i)
+            t_ids.append(lid)
             touched.append(lm)
+        t_rows, t_ids = np.array(t_rows, np.int64), np.array(t_ids, np.int64)
+        rec.landmark[t_rows] = t_ids
+        st = getattr(self.landmarks, "observations", None)
+        if st is not None:
+            st.append(t_ids, k_new, t_rows)
         # new landmarks from stereo: X = ((u-cx) z / fx, (v-cy) z / fy, z), then to world
         idx = np.flatnonzero((kf.new_landmark_ids >= 0) & (rec.landmark < 0) & (kf.depth > 0))
         z = kf.depth[idx].astype(np.float64)
@@ -201,7 +210,7 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
                                 for i, lid in zip(idx.tolist(), np.asarray(kf.new_landmark_ids)[idx].tolist())],
                                Pw, rec.descriptors[idx])
         rec.landmark[idx] = np.asarray(kf.new_landmark_ids)[idx]
-        self._insert_table = ObservationTable(self.landmarks, rec.landmark[rec.landmark >= 0])
+        self._insert_table = observation_reader(self.landmarks, rec.landmark[rec.landmark >= 0])
         self._update_descriptors(touched, self._insert_table)
         if self.params.use_lines:
             self._insert_lines(kf, rec)
@@ -271,25 +280,23 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
 
     def _update_descriptors(self, landmarks: list[Landmark], table: ObservationTable | None = None) -> None:
         """ORB-SLAM's distinctive descriptor: the observation with the least median distance to
-        the others. Batched over landmarks with the same number of observations. ``table``: the
-        observations of (at least) these landmarks, current (read here when None)."""
+        the others. Batched over landmarks with the same number of observations. ``table``: a
+        current snapshot of (at least) these landmarks' observations when the store keeps none."""
         ids = np.fromiter(map(_ID, landmarks), np.int64, len(landmarks))
-        if table is None:
-            table = ObservationTable(self.landmarks, ids)
-        g = table.groups(ids)
-        n_all = table.count[g]
-        g = g[n_all >= 3]
-        if len(g) == 0:
+        e_kf, e_kp, n_all = observation_reader(self.landmarks, ids, table).of(ids)
+        first = np.cumsum(n_all) - n_all
+        sel = np.flatnonzero(n_all >= 3)
+        if len(sel) == 0:
             return
-        n_all = table.count[g]
+        n_all, first = n_all[sel], first[sel]
         m = self.params.descriptor_max_observations   # 0: every observation (ORB-SLAM's)
         n_used = np.minimum(n_all, m) if m else n_all
         # each landmark's last n_used observations (still_window.descriptor_observations: the newest m)
-        skip = n_all - n_used
+        first = first + n_all - n_used
         # every observation's descriptor by one gather from the observing keyframes' descriptor
         # arrays laid end to end, the keyframes' offsets by a lookup table (np.array over nested
         # lists of 32-byte rows cost ~2 ms per KITTI keyframe)
-        kf_ids = _sorted_unique_ids(table.kf[table.rows(g)]).tolist()
+        kf_ids = _sorted_unique_ids(e_kf).tolist()
         desc_table = np.concatenate([self.keyframes[k].descriptors for k in kf_ids])
         start = np.cumsum([0] + [len(self.keyframes[k].descriptors) for k in kf_ids[:-1]])
         row_of_kf = np.zeros(kf_ids[-1] + 1, np.int64)
@@ -298,12 +305,12 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         # landmarks grouped by their number of observations (a group's result does not depend on
         # which landmarks share it: the index is computed per landmark)
         for n in np.unique(n_used).tolist():
-            sel = np.flatnonzero(n_used == n)
-            r = (table.start[g[sel]] + skip[sel])[:, None] + np.arange(n)
-            desc = desc_table[row_of_kf[table.kf[r]] + table.kp[r]]
+            g = np.flatnonzero(n_used == n)
+            r = first[g][:, None] + np.arange(n)
+            desc = desc_table[row_of_kf[e_kf[r]] + e_kp[r]]
             best = distinctive_index(desc)
-            chosen = desc[np.arange(len(sel)), best]
-            lids = table.ids[g[sel]]
+            chosen = desc[np.arange(len(g)), best]
+            lids = ids[sel[g]]
             if store_rows is not None:   # one scatter into the store's descriptor rows
                 store_rows.desc[lids] = chosen
             else:
@@ -318,11 +325,7 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         # the observing keyframes of all of rec's landmarks in one array, counted by np.bincount (a
         # Counter over the chained dicts cost ~0.9 ms per EuRoC keyframe with ~20 observers per landmark)
         ids = rec.landmark[rec.landmark >= 0]
-        if table is None:
-            table = ObservationTable(self.landmarks, ids)
-        else:
-            table.add(ids)
-        keys = table.of(ids)[0]
+        keys = observation_reader(self.landmarks, ids, table).of(ids)[0]
         per_kf = np.bincount(keys) if len(keys) else np.zeros(0, np.int64)
         seen = np.flatnonzero(per_kf)
         counts = dict(zip(seen.tolist(), per_kf[seen].tolist()))
@@ -339,8 +342,7 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         other keyframes seeing their landmarks (fixed), as ORB-SLAM's LocalBundleAdjustment.
         ``table``: current observations of rec's landmarks; the window's others are added to it."""
         p = self.params
-        if table is None:
-            table = ObservationTable(self.landmarks)
+        table = observation_reader(self.landmarks, (), table)
         counts = self._covisible(rec, table)
         neigh = [k for k, c in counts.items() if c >= p.covisibility_min_shared
                  and self.keyframes[k].segment == rec.segment]

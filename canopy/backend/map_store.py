@@ -8,11 +8,11 @@ whole map. A landmark's ``obs`` maps keyframe index -> keypoint row and the keyf
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from itertools import chain
 from operator import attrgetter
 
 import numpy as np
 
+from canopy.backend.observations import ObsDict, ObservationStore, ObservationTable, observation_reader
 from shared.arrays import unique_sorted
 
 
@@ -49,12 +49,12 @@ class Landmark:
     a copy and assigning them writes the row: the same values either way, and a position read
     before a BA keeps its value (as the array a landmark used to hold did)."""
 
-    __slots__ = ("id", "obs", "first_order", "segment", "visible", "found", "_rows", "_position", "_descriptor")
+    __slots__ = ("id", "_obs", "first_order", "segment", "visible", "found", "_rows", "_position", "_descriptor")
 
     def __init__(self, id: int, position, descriptor, obs: dict[int, int] | None = None, first_order: int = 0,
                  segment: int = 0, visible: int = 1, found: int = 1):
         self.id = id
-        self.obs = {} if obs is None else obs
+        self._obs = ObsDict() if obs is None else ObsDict(obs)
         self.first_order = first_order
         self.segment = segment
         self.visible = visible
@@ -62,6 +62,22 @@ class Landmark:
         self._rows = None
         self._position = position
         self._descriptor = descriptor
+
+    @property
+    def obs(self) -> "ObsDict":
+        """Keyframe index -> keypoint row, in insertion order (a dict; in a ``LandmarkStore`` its
+        changes are mirrored in the store's ``ObservationStore``)."""
+        return self._obs
+
+    @obs.setter
+    def obs(self, value) -> None:
+        old, new = self._obs, ObsDict(value)
+        store, lid = old._store, old._lid
+        old._store = None
+        self._obs = new
+        if store is not None:
+            new._store, new._lid = store, lid
+            store.load(np.array([lid], np.int64), [new])
 
     @property
     def position(self) -> np.ndarray:
@@ -99,8 +115,10 @@ class Landmark:
             self._position, self._descriptor = pos, desc
 
     def __getstate__(self):   # a pickled landmark carries its values, not its store's arrays
-        return {k: getattr(self, k) for k in ("id", "obs", "first_order", "segment", "visible", "found",
-                                               "position", "descriptor")}
+        state = {k: getattr(self, k) for k in ("id", "first_order", "segment", "visible", "found", "position",
+                                                "descriptor")}
+        state["obs"] = dict(self._obs)
+        return state
 
     def __setstate__(self, state) -> None:
         self.__init__(state["id"], state["position"], state["descriptor"], state["obs"], state["first_order"],
@@ -141,6 +159,8 @@ class LandmarkStore(dict):
     def __init__(self):
         super().__init__()
         self.rows: LandmarkRows | None = LandmarkRows()
+        # every landmark's observations in arrays (None: off, readers chain the dicts: ObservationTable)
+        self.observations: ObservationStore | None = ObservationStore()
 
     def __setitem__(self, lid, lm) -> None:
         if self.rows is not None and (lid != lm.id or lid < 0 or lid > _SPARSE * (len(self) + 1) + (1 << 20)):
@@ -150,7 +170,54 @@ class LandmarkStore(dict):
         if self.rows is not None:
             self.rows.reserve(lid)
         lm._attach(self.rows)
+        self._observe([lid], [lm])
+        old = dict.get(self, lid)
+        if old is not None and old is not lm:
+            old._obs._store = None
         super().__setitem__(lid, lm)
+
+    def _observe(self, ids: list, landmarks: list) -> None:
+        """Mirror the landmarks' observations in ``observations`` (turned off for good by an id beyond
+        the dense range: ``_DENSE_OBS``)."""
+        st = self.observations
+        if st is None or not ids:
+            return
+        top = max(ids)
+        if min(ids) < 0 or top > _DENSE_OBS * (len(self) + len(ids) + 1) + 4096:
+            for lm in self.values():
+                lm._obs._store = None
+            self.observations = None
+            return
+        for lid, lm in zip(ids, landmarks):
+            o = lm._obs
+            if o._store is not None and o._store is not st:
+                raise ValueError(f"landmark {lid} is stored in another LandmarkStore")
+            o._store, o._lid = st, lid
+        st.load(np.asarray(ids, np.int64), [lm._obs for lm in landmarks])
+
+    def _forget(self, lm) -> None:
+        if lm is not None:
+            lm._obs._store = None
+
+    def pop(self, lid, *default):
+        lm = dict.pop(self, lid, *default)
+        if lm is not None and lm is not (default[0] if default else None):
+            self._forget(lm)
+        return lm
+
+    def __delitem__(self, lid) -> None:
+        self._forget(dict.get(self, lid))
+        dict.__delitem__(self, lid)
+
+    def popitem(self):
+        lid, lm = dict.popitem(self)
+        self._forget(lm)
+        return lid, lm
+
+    def clear(self) -> None:
+        for lm in self.values():
+            self._forget(lm)
+        dict.clear(self)
 
     def add_new(self, landmarks: list, positions: np.ndarray, descriptors: np.ndarray) -> None:
         """Store new landmarks (built with position and descriptor None) whose values are the rows
@@ -170,7 +237,9 @@ class LandmarkStore(dict):
         rows.desc[ids] = descriptors
         for lm in landmarks:
             lm._rows = rows
-        dict.update(self, zip(ids.tolist(), landmarks))
+        lids = ids.tolist()
+        self._observe(lids, landmarks)
+        dict.update(self, zip(lids, landmarks))
 
     def update(self, *args, **kwargs) -> None:
         for lid, lm in dict(*args, **kwargs).items():
@@ -183,8 +252,8 @@ class LandmarkStore(dict):
 
 
 _SPARSE = 64
+_DENSE_OBS = 64   # ObservationStore: ids up to 64 rows per stored landmark (triangulated ids from 1 << 20: off)
 _ID = attrgetter("id")
-_OBS = attrgetter("obs")
 
 
 @dataclass
@@ -211,83 +280,6 @@ def _sorted_unique_ids(ids: np.ndarray) -> np.ndarray:
     present = np.zeros(top + 1, bool)
     present[ids] = True
     return np.flatnonzero(present).astype(np.int64)
-
-
-class ObservationTable:
-    """The observations (keyframe, keypoint row) of a set of landmarks as arrays, read from their
-    ``obs`` dicts once and then selected, counted and grouped by gathers (issue 8).
-
-    Why: one keyframe's steps read the same landmarks' observations several times with no change
-    in between: the distinctive descriptors and the covisibility counts (the new keyframe's
-    landmarks), the window's fixed set and local BA's edges (the window's landmarks). Each step
-    chained the dicts again (``np.fromiter`` over ~10^5 dict entries per EuRoC hover keyframe,
-    ~5 ms); the table chains each landmark once. Each landmark's rows are contiguous (a group) and
-    in its dict's (insertion) order, so a selection gives the same arrays as chaining the dicts.
-
-    The table is a snapshot: whoever changes observations while it is in use says so
-    (``drop_keyframe`` for keyframe culling) or builds a new one; ``LocalMapper.insert_keyframe``
-    uses one from its insertion to local BA's edges and one for keyframe culling."""
-
-    def __init__(self, landmarks, ids=()):
-        self._landmarks = landmarks
-        self.ids = np.zeros(0, np.int64)     # landmark of each group
-        self.start = np.zeros(0, np.int64)   # its first row
-        self.count = np.zeros(0, np.int64)   # its rows
-        self.kf = np.zeros(0, np.int64)
-        self.kp = np.zeros(0, np.int64)
-        self._order = self._sorted = np.zeros(0, np.int64)   # ids sorted, for lookups
-        self.add(ids)
-
-    def contains(self, ids) -> np.ndarray:
-        ids = np.asarray(ids, np.int64)
-        if len(self._sorted) == 0:
-            return np.zeros(len(ids), bool)
-        pos = np.minimum(np.searchsorted(self._sorted, ids), len(self._sorted) - 1)
-        return self._sorted[pos] == ids
-
-    def add(self, ids) -> None:
-        """Chain the observations of landmarks ``ids`` (in the store) not in the table yet."""
-        ids = np.asarray(ids, np.int64)
-        ids = unique_sorted(ids[~self.contains(ids)]) if len(self.ids) else unique_sorted(ids)
-        if len(ids) == 0:
-            return
-        obs = list(map(_OBS, map(self._landmarks.__getitem__, ids.tolist())))
-        n = np.fromiter(map(len, obs), np.int64, len(obs))
-        total = int(n.sum())
-        kf = np.fromiter(chain.from_iterable(obs), np.int64, total)
-        kp = np.fromiter(chain.from_iterable(map(dict.values, obs)), np.int64, total)
-        self.start = np.concatenate([self.start, len(self.kf) + np.cumsum(n) - n])
-        self.count = np.concatenate([self.count, n])
-        self.ids = np.concatenate([self.ids, ids])
-        self.kf, self.kp = np.concatenate([self.kf, kf]), np.concatenate([self.kp, kp])
-        self._order = np.argsort(self.ids, kind="stable")
-        self._sorted = self.ids[self._order]
-
-    def groups(self, ids) -> np.ndarray:
-        """Group index of each of ``ids`` (every one in the table)."""
-        return self._order[np.searchsorted(self._sorted, np.asarray(ids, np.int64))]
-
-    def rows(self, groups) -> np.ndarray:
-        """The rows of ``groups`` laid end to end in that order, each group's in its dict order."""
-        n = self.count[groups]
-        return np.arange(int(n.sum())) + np.repeat(self.start[groups] - (np.cumsum(n) - n), n)
-
-    def of(self, ids):
-        """(keyframes, keypoint rows, observations per landmark) of landmarks ``ids`` in that order:
-        what chaining their ``obs`` dicts gives."""
-        g = self.groups(ids)
-        r = self.rows(g)
-        return self.kf[r], self.kp[r], self.count[g]
-
-    def drop_keyframe(self, k: int) -> None:
-        """Keyframe ``k``'s observations left the landmarks (``keyframe_culling.cull_keyframe``)."""
-        dead = self.kf == k
-        if not dead.any():
-            return
-        group = np.repeat(np.arange(len(self.ids)), self.count)
-        self.count = self.count - np.bincount(group[dead], minlength=len(self.ids))
-        self.kf, self.kp = self.kf[~dead], self.kp[~dead]
-        self.start = np.cumsum(self.count) - self.count
 
 
 def local_map_update(index: int, keyframes: dict, landmarks: dict, local: list[int], fixed: list[int]):
@@ -362,18 +354,14 @@ class MapStoreAccess:
     def _observation_edges(self, local: list[int], kf_set: set[int], table: ObservationTable | None = None):
         """Local BA's point edges: the landmarks the ``local`` keyframes observe (sorted ids) and
         every observation of them by a keyframe of ``kf_set``, as arrays (keyframe, landmark,
-        keypoint row). ``table``: the step's observations where nothing changed them since it was
-        read. Returns (lm_ids, e_kf, e_lm, e_kp)."""
+        keypoint row). ``table``: a snapshot of the observations still current, where the store keeps
+        none (``observations.observation_reader``). Returns (lm_ids, e_kf, e_lm, e_kp)."""
         seen = [self.keyframes[k].landmark for k in local]
         lm_arr = _sorted_unique_ids(np.concatenate(seen)) if seen else np.zeros(0, np.int64)
         lm_ids = lm_arr.tolist()
-        # every landmark's observations in their dict order from the step's table (the window read
-        # them already: LocalMapper._local_window) or chained here, then the window's by a lookup table
-        if table is None:
-            table = ObservationTable(self.landmarks, lm_arr)
-        else:
-            table.add(lm_arr)
-        e_kf, e_kp, n_obs = table.of(lm_arr)
+        # every landmark's observations in their dict order by one gather (observations.py), then the
+        # window's by a lookup table (a generator over ~7 k edges cost ~3 ms per KITTI keyframe)
+        e_kf, e_kp, n_obs = observation_reader(self.landmarks, lm_arr, table).of(lm_arr)
         total = len(e_kf)
         e_lm = np.repeat(lm_arr, n_obs)
         if total == 0 or not kf_set:
