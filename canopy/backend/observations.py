@@ -156,7 +156,7 @@ class ObservationStore:
             return
         c = self.n[ids]
         m = int(c.max())
-        sub_kf, sub_kp = self.kf[ids, :m], self.kp[ids, :m]
+        sub_kf, sub_kp = np.take(self.kf, ids, axis=0)[:, :m], np.take(self.kp, ids, axis=0)[:, :m]
         hit = (sub_kf == k) & (np.arange(m) < c[:, None])
         rows = np.flatnonzero(hit.any(axis=1))
         if len(rows) == 0:
@@ -178,7 +178,9 @@ class ObservationStore:
         n = self.n[ids]
         m = int(n.max()) if len(n) else 0
         keep = np.arange(m) < n[:, None]
-        return self.kf[ids, :m][keep].astype(np.int64), self.kp[ids, :m][keep].astype(np.int64), n
+        # whole rows by np.take (~5x cheaper than a fancy index of 2-D rows), then the first n of each
+        return (np.take(self.kf, ids, axis=0)[:, :m][keep].astype(np.int64),
+                np.take(self.kp, ids, axis=0)[:, :m][keep].astype(np.int64), n)
 
 
 class ObservationTable:
