@@ -83,7 +83,7 @@ def cull_keyframe(mapper, k: int, table: ObservationTable | None = None) -> int:
         lm = mapper.landmarks.get(lid)
         if lm is None:
             continue
-        obs = lm.obs
+        obs = lm._obs   # the dict by its slot (the property costs ~0.12 us a read)
         if dict.pop(obs, k, None) is not None:
             dropped.append(lid)
         if not obs:

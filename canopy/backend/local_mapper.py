@@ -366,19 +366,25 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         """ORB-SLAM MapPointCulling for recent landmarks, plus landmarks left unobserved."""
         p = self.params
         bad = []
+        # the rule's numbers as locals and each landmark's dict by its slot (Landmark.obs is a property,
+        # ~0.12 us more a read): the loop visits every landmark (~6 k per KITTI keyframe)
+        order, segment, recent, ratio = rec.order, rec.segment, p.recent_age_keyframes, p.min_found_ratio
+        cull_age, min_obs = p.cull_age_keyframes, p.min_observations
+        tri_base = p.triangulate_id_base if p.triangulate_new_points else None
         for lid, lm in self.landmarks.items():
-            if not lm.obs:
+            obs = lm._obs
+            if not obs:
                 bad.append(lid)
                 continue
-            age = rec.order - lm.first_order
-            if lm.segment != rec.segment or age > p.recent_age_keyframes:
+            age = order - lm.first_order
+            if lm.segment != segment or age > recent:
                 continue
-            if lm.found < p.min_found_ratio * lm.visible:
+            if lm.found < ratio * lm.visible:
                 bad.append(lid)
-            elif age >= p.cull_age_keyframes and len(lm.obs) < p.min_observations:
+            elif age >= cull_age and len(obs) < min_obs:
                 bad.append(lid)
-            elif p.triangulate_new_points and lid >= p.triangulate_id_base and age >= p.cull_age_keyframes \
-                    and len(lm.obs) < p.triangulate_min_observations:
+            elif tri_base is not None and lid >= tri_base and age >= cull_age \
+                    and len(obs) < p.triangulate_min_observations:
                 bad.append(lid)   # a triangulated landmark starts with two observations
         for lid in bad:
             self._delete_landmark(lid)
