@@ -186,6 +186,13 @@ def test_the_store_follows_every_kind_of_change_of_the_dicts():
     del store[6]
     store[5] = Landmark(5, np.zeros(3), np.zeros(32, np.uint8), {9: 9, 2: 2})
     _stored_vs_dicts(store, [i for i in range(80) if i != 6])
+    # a landmark never stored changes as a plain dict
+    loose = Landmark(99, np.zeros(3), np.zeros(32, np.uint8), {1: 2})
+    loose.obs[3] = 4
+    loose.obs.pop(1)
+    loose.obs = dict(loose.obs, **{})
+    loose.obs.clear()
+    assert loose.obs == {}
     # pickled and copied as plain dicts
     import copy
     import pickle

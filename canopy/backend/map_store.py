@@ -72,7 +72,7 @@ class Landmark:
     @obs.setter
     def obs(self, value) -> None:
         old, new = self._obs, ObsDict(value)
-        store, lid = old._store, old._lid
+        store, lid = getattr(old, "_store", None), getattr(old, "_lid", -1)
         old._store = None
         self._obs = new
         if store is not None:
@@ -188,12 +188,11 @@ class LandmarkStore(dict):
                 lm._obs._store = None
             self.observations = None
             return
-        for lid, lm in zip(ids, landmarks):
-            o = lm._obs
-            if o._store is not None and o._store is not st:
-                raise ValueError(f"landmark {lid} is stored in another LandmarkStore")
-            o._store, o._lid = st, lid
-        st.load(np.asarray(ids, np.int64), [lm._obs for lm in landmarks])
+        obs = list(map(_OBS, landmarks))
+        for o, lid in zip(obs, ids):   # a landmark lives in one store (as its LandmarkRows)
+            o._store = st
+            o._lid = lid
+        st.load(np.asarray(ids, np.int64), obs)
 
     def _forget(self, lm) -> None:
         if lm is not None:
@@ -254,6 +253,7 @@ class LandmarkStore(dict):
 _SPARSE = 64
 _DENSE_OBS = 64   # ObservationStore: ids up to 64 rows per stored landmark (triangulated ids from 1 << 20: off)
 _ID = attrgetter("id")
+_OBS = attrgetter("_obs")   # a Landmark's dict by its slot (Landmark.obs is a property)
 
 
 @dataclass
