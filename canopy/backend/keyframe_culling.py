@@ -27,26 +27,23 @@ What culling a keyframe means for the rest of the system:
 """
 from __future__ import annotations
 
-from collections import Counter
-from itertools import chain
-
 import numpy as np
 
+from canopy.backend.observations import ObservationTable, observation_reader
 
-def redundant_fraction(mapper, k: int, min_observers: int) -> float:
+
+def redundant_fraction(mapper, k: int, min_observers: int, table: ObservationTable | None = None) -> float:
     """Share of keyframe ``k``'s landmarks that at least ``min_observers`` other keyframes observe at
     the same or a finer scale (octave <= k's octave + 1, ORB-SLAM's ``scaleLeveli <= scaleLevel+1``).
-    0 for a keyframe without landmarks. Every observation of k's landmarks is gathered into arrays
-    at C level (as local BA's edges, ``MapStoreAccess._observation_edges``): no Python step per one."""
+    0 for a keyframe without landmarks. Every observation of k's landmarks comes as arrays from
+    ``table`` (``map_store.ObservationTable``: current observations; k's landmarks are added to it)
+    or one read here: no Python step per observation."""
     rec = mapper.keyframes[k]
     rows = np.flatnonzero(rec.landmark >= 0)
     if len(rows) == 0:
         return 0.0
-    obs = [mapper.landmarks[lid].obs for lid in rec.landmark[rows].tolist()]
-    n_obs = np.fromiter(map(len, obs), np.int64, len(obs))
-    total = int(n_obs.sum())
-    e_kf = np.fromiter(chain.from_iterable(obs), np.int64, total)
-    e_kp = np.fromiter(chain.from_iterable(map(dict.values, obs)), np.int64, total)
+    lids = rec.landmark[rows]
+    e_kf, e_kp, n_obs = observation_reader(mapper.landmarks, lids, table).of(lids)
     # every observing keyframe's octaves laid end to end, found by an offset table
     kf_ids = np.unique(e_kf)
     table = np.concatenate([mapper.keyframes[kk].octave for kk in kf_ids.tolist()])
@@ -58,16 +55,19 @@ def redundant_fraction(mapper, k: int, min_observers: int) -> float:
     return float(np.count_nonzero(per_landmark >= min_observers)) / len(rows)
 
 
-def cull_keyframe(mapper, k: int) -> int:
+def cull_keyframe(mapper, k: int, table: ObservationTable | None = None) -> int:
     """Remove keyframe ``k`` from the map: its observations leave its landmarks (landmarks left
     without any are deleted), and its pose is kept relative to the remaining keyframe it shares the
-    most landmarks with (``mapper.culled_keyframes[k] = (parent, T_parent_k, timestamp)``). Returns the parent."""
+    most landmarks with (``mapper.culled_keyframes[k] = (parent, T_parent_k, timestamp)``). Returns the
+    parent. ``table``: current observations (``map_store.ObservationTable``), kept current here."""
     rec = mapper.keyframes[k]
-    lids = rec.landmark[rec.landmark >= 0].tolist()
-    # the other observers of its landmarks counted at C level (a generator per landmark cost ~5 ms per
-    # culled EuRoC keyframe, ~600 landmarks x ~20 observers); k's own count is dropped after
-    get = mapper.landmarks.get
-    shared = Counter(chain.from_iterable(lm.obs for lm in map(get, lids) if lm is not None))
+    lids = [lid for lid in rec.landmark[rec.landmark >= 0].tolist() if lid in mapper.landmarks]
+    # the other observers of its landmarks counted by np.bincount (a generator per landmark cost ~5 ms
+    # per culled EuRoC keyframe, ~600 landmarks x ~20 observers); k's own count is dropped after
+    table = observation_reader(mapper.landmarks, lids, table)
+    per_kf = np.bincount(table.of(lids)[0]) if lids else np.zeros(0, np.int64)
+    seen = np.flatnonzero(per_kf)
+    shared = dict(zip(seen.tolist(), per_kf[seen].tolist()))
     shared.pop(k, None)
     same = [kk for kk in shared if mapper.keyframes[kk].segment == rec.segment]
     if same:
@@ -76,14 +76,20 @@ def cull_keyframe(mapper, k: int) -> int:
         parent = max(kk for kk, r in mapper.keyframes.items() if kk < k and r.segment == rec.segment)
     T_parent = mapper.keyframes[parent].T_world_cam
     mapper.culled_keyframes[k] = (parent, np.linalg.inv(T_parent) @ rec.T_world_cam, rec.timestamp)
+    # k leaves its landmarks' dicts by dict's own pop and the observation arrays in one step (ObsDict's
+    # hook per observation cost ~1 us each)
+    dropped = []
     for lid in lids:
         lm = mapper.landmarks.get(lid)
         if lm is None:
             continue
-        lm.obs.pop(k, None)
-        if not lm.obs:
+        obs = lm._obs   # the dict by its slot (the property costs ~0.12 us a read)
+        if dict.pop(obs, k, None) is not None:
+            dropped.append(lid)
+        if not obs:
             del mapper.landmarks[lid]
             mapper.n_culled += 1
+    table.drop_keyframe(k, dropped)
     if rec.line_landmark is not None:
         for lid in rec.line_landmark[rec.line_landmark >= 0].tolist():
             ln = mapper.lines.get(lid)
@@ -95,14 +101,16 @@ def cull_keyframe(mapper, k: int) -> int:
     return parent
 
 
-def cull_redundant_keyframes(mapper, rec, covisible: dict[int, int]) -> list[int]:
+def cull_redundant_keyframes(mapper, rec, covisible: dict[int, int], table: ObservationTable | None = None) -> list[int]:
     """ORB-SLAM's KeyFrameCulling after keyframe ``rec``: each of its covisible keyframes (strongest
     first, as GetVectorCovisibleKeyFrames) whose landmarks are more than ``keyframe_culling_redundancy``
     (ORB-SLAM: nRedundantObservations > 0.9 nMPs) seen by ``keyframe_culling_observers`` other keyframes goes, in turn (a culled keyframe's
     observations no longer count for the next). Protected: ``rec``, its segment's first keyframe, and
     the newest ``keyframe_culling_keep_recent`` keyframes, and the keyframes of a closed loop
-    (``mapper.loop_keyframes``). Returns the culled keyframes' indices."""
+    (``mapper.loop_keyframes``). ``table``: current observations (``map_store.ObservationTable``) shared
+    by the candidates' tests and kept current by each culling. Returns the culled keyframes' indices."""
     p = mapper.params
+    table = observation_reader(mapper.landmarks, (), table)
     first = mapper._segment_first[rec.segment]
     loop = getattr(mapper, "loop_keyframes", ())
     recent = {r.index for r in sorted(mapper.keyframes.values(), key=lambda r: r.order)[-p.keyframe_culling_keep_recent:]} \
@@ -112,8 +120,8 @@ def cull_redundant_keyframes(mapper, rec, covisible: dict[int, int]) -> list[int
         if k == rec.index or k == first or k in recent or k in loop or k not in mapper.keyframes \
                 or mapper.keyframes[k].segment != rec.segment:
             continue
-        if redundant_fraction(mapper, k, p.keyframe_culling_observers) > p.keyframe_culling_redundancy:
-            cull_keyframe(mapper, k)
+        if redundant_fraction(mapper, k, p.keyframe_culling_observers, table) > p.keyframe_culling_redundancy:
+            cull_keyframe(mapper, k, table)
             culled.append(k)
     return culled
 

@@ -16,7 +16,6 @@ Where things are:
 from __future__ import annotations
 
 import time
-from itertools import chain
 from operator import attrgetter
 
 import gtsam
@@ -26,9 +25,10 @@ from canopy.backend.keyframe_culling import cull_redundant_keyframes
 from canopy.backend.local_ba import LocalBundleAdjustmentMixin
 from canopy.backend.map_store import Keyframe, Landmark, LandmarkStore, LineLandmark, MapStoreAccess, _sorted_unique_ids, \
     local_map_update
+from canopy.backend.observations import ObservationTable, observation_reader
 from canopy.backend.params import MappingParams
 from canopy.backend import point_confirmation as confirmation
-from canopy.backend.still_window import bounded_fixed, descriptor_observations, window_neighbours
+from canopy.backend.still_window import bounded_fixed, window_neighbours
 from canopy.backend.triangulation import check_tracker_ids, pair_gates, triangulate_with_partners, \
     triangulation_partners
 from canopy.frontend.matching import as_words, _popcount64
@@ -40,7 +40,6 @@ from shared.types import StereoCalibration
 __all__ = ["Keyframe", "Landmark", "LineLandmark", "LocalMapper"]
 
 
-_OBS = attrgetter("obs")
 _ID = attrgetter("id")
 
 
@@ -95,6 +94,7 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         # keyframes at either end of a closed loop: never culled (ORB-SLAM's SetNotErase on the loop's
         # two keyframes, LoopClosing::ComputeSim3 / KeyFrame::AddLoopEdge)
         self.loop_keyframes: set[int] = set()
+        self._insert_table: ObservationTable | None = None   # _insert's, taken by insert_keyframe
 
     # ----------------------------------------------------------------- public API
     def insert_keyframe(self, kf: KeyframeData) -> LocalMapUpdate:
@@ -102,13 +102,17 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         t_all = time.perf_counter()
         t0 = time.perf_counter()
         rec = self._insert(kf)
+        # the observations of rec's landmarks as insertion left them (map_store.ObservationTable): read
+        # once for the descriptors, covisibility, the window and BA's edges; nothing changes them in between
+        table, self._insert_table = self._insert_table, None
         timings["insert"] = _ms(t0)
         if self.params.triangulate_new_points:
             t0 = time.perf_counter()
             self._triangulate_new_points(rec, kf.scale_factor)
+            table = None   # new landmarks and fused observations: read afresh
             timings["triangulate"] = _ms(t0)
         t0 = time.perf_counter()
-        local, fixed = self._local_window(rec)
+        local, fixed = self._local_window(rec, table)
         self.last_window = (local, fixed)  # for diagnosis (benchmarks/diagnose_drift.py)
         timings["window"] = _ms(t0)
         t0 = time.perf_counter()
@@ -121,16 +125,18 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
                 # mapping.triangulate_confirm_ba off: the unconfirmed triangulated landmarks sit out BA
                 with confirmation.hidden_from_ba(self, confirmation.pending_ids(
                         self.landmarks, p.triangulate_id_base, p.triangulate_min_observations, rec.segment)):
-                    self._bundle_adjust(local, ba_fixed, kf.scale_factor)
+                    self._bundle_adjust(local, ba_fixed, kf.scale_factor, table)
             else:
-                self._bundle_adjust(local, ba_fixed, kf.scale_factor)
+                self._bundle_adjust(local, ba_fixed, kf.scale_factor, table)
         timings["ba"] = _ms(t0)
         t0 = time.perf_counter()
         self._cull(rec)
         timings["cull"] = _ms(t0)
         if self.params.keyframe_culling:  # ORB-SLAM's KeyFrameCulling, after local BA as there
             t0 = time.perf_counter()
-            if cull_redundant_keyframes(self, rec, self._covisible(rec)):
+            # BA's outliers and landmark culling changed observations: a new table, kept current by culling
+            table = observation_reader(self.landmarks, rec.landmark[rec.landmark >= 0])
+            if cull_redundant_keyframes(self, rec, self._covisible(rec, table), table):
                 local = [k for k in local if k in self.keyframes]
                 fixed = [k for k in fixed if k in self.keyframes]
             timings["kfcull"] = _ms(t0)
@@ -173,18 +179,26 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         self._order += 1
         self.keyframes[kf.index] = rec
         self._add_seen_counts(kf)   # ORB-SLAM's found/visible statistics collected by tracking
-        # observations of existing landmarks
-        touched = []
+        # observations of existing landmarks: written to the dicts with dict's own method and to the
+        # store's arrays in one append (ObsDict's hook per observation cost ~1 us each)
+        touched, t_rows, t_ids = [], [], []
         seen_rows = np.flatnonzero(kf.landmark_ids >= 0)
+        get, k_new, seg, setobs = self.landmarks.get, kf.index, self._segment, dict.__setitem__
         for i, lid in zip(seen_rows.tolist(), np.asarray(kf.landmark_ids)[seen_rows].tolist()):
-            lm = self.landmarks.get(lid)
-            if lm is None or lm.segment != self._segment or kf.index in lm.obs:
+            lm = get(lid)
+            if lm is None or lm.segment != seg or k_new in lm._obs:
                 continue  # culled meanwhile, or from an older map segment
-            lm.obs[kf.index] = i
+            setobs(lm._obs, k_new, i)
             lm.visible += 1
             lm.found += 1
-            rec.landmark[i] = lid
+            t_rows.append(i)
+            t_ids.append(lid)
             touched.append(lm)
+        t_rows, t_ids = np.array(t_rows, np.int64), np.array(t_ids, np.int64)
+        rec.landmark[t_rows] = t_ids
+        st = getattr(self.landmarks, "observations", None)
+        if st is not None:
+            st.append(t_ids, k_new, t_rows)
         # new landmarks from stereo: X = ((u-cx) z / fx, (v-cy) z / fy, z), then to world
         idx = np.flatnonzero((kf.new_landmark_ids >= 0) & (rec.landmark < 0) & (kf.depth > 0))
         z = kf.depth[idx].astype(np.float64)
@@ -196,7 +210,8 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
                                 for i, lid in zip(idx.tolist(), np.asarray(kf.new_landmark_ids)[idx].tolist())],
                                Pw, rec.descriptors[idx])
         rec.landmark[idx] = np.asarray(kf.new_landmark_ids)[idx]
-        self._update_descriptors(touched)
+        self._insert_table = observation_reader(self.landmarks, rec.landmark[rec.landmark >= 0])
+        self._update_descriptors(touched, self._insert_table)
         if self.params.use_lines:
             self._insert_lines(kf, rec)
         return rec
@@ -263,52 +278,54 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
                                            first_order=rec.order, segment=self._segment)
             rec.line_landmark[i] = lid
 
-    def _update_descriptors(self, landmarks: list[Landmark]) -> None:
+    def _update_descriptors(self, landmarks: list[Landmark], table: ObservationTable | None = None) -> None:
         """ORB-SLAM's distinctive descriptor: the observation with the least median distance to
-        the others. Batched over landmarks with the same number of observations."""
-        by_count: dict[int, list[Landmark]] = {}
-        m = self.params.descriptor_max_observations   # 0: every observation (ORB-SLAM's)
-        obs_of = {}
-        for lm in landmarks:
-            if len(lm.obs) >= 3:
-                by_count.setdefault(min(len(lm.obs), m) if m else len(lm.obs), []).append(lm)
-                if m and len(lm.obs) > m:
-                    obs_of[lm.id] = descriptor_observations(lm.obs, m)
-        if not by_count:
+        the others. Batched over landmarks with the same number of observations. ``table``: a
+        current snapshot of (at least) these landmarks' observations when the store keeps none."""
+        ids = np.fromiter(map(_ID, landmarks), np.int64, len(landmarks))
+        e_kf, e_kp, n_all = observation_reader(self.landmarks, ids, table).of(ids)
+        first = np.cumsum(n_all) - n_all
+        sel = np.flatnonzero(n_all >= 3)
+        if len(sel) == 0:
             return
-        obs_for = (lambda lm: obs_of.get(lm.id, lm.obs)) if obs_of else _OBS
+        n_all, first = n_all[sel], first[sel]
+        m = self.params.descriptor_max_observations   # 0: every observation (ORB-SLAM's)
+        n_used = np.minimum(n_all, m) if m else n_all
+        # each landmark's last n_used observations (still_window.descriptor_observations: the newest m)
+        first = first + n_all - n_used
         # every observation's descriptor by one gather from the observing keyframes' descriptor
-        # arrays laid end to end (np.array over nested lists of 32-byte rows cost ~2 ms per KITTI keyframe)
-        # the observations' keyframes and keypoint rows chained at C level (a generator per
-        # observation cost ~1 ms per KITTI keyframe), the keyframes' offsets by a lookup table
-        kf_ids = sorted(set(chain.from_iterable(map(obs_for, chain.from_iterable(by_count.values())))))
-        table = np.concatenate([self.keyframes[k].descriptors for k in kf_ids])
+        # arrays laid end to end, the keyframes' offsets by a lookup table (np.array over nested
+        # lists of 32-byte rows cost ~2 ms per KITTI keyframe)
+        kf_ids = _sorted_unique_ids(e_kf).tolist()
+        desc_table = np.concatenate([self.keyframes[k].descriptors for k in kf_ids])
         start = np.cumsum([0] + [len(self.keyframes[k].descriptors) for k in kf_ids[:-1]])
         row_of_kf = np.zeros(kf_ids[-1] + 1, np.int64)
         row_of_kf[kf_ids] = start
-        for n, group in by_count.items():
-            obs = list(map(obs_for, group))
-            rows = row_of_kf[np.fromiter(chain.from_iterable(obs), np.int64, len(group) * n)] + \
-                np.fromiter(chain.from_iterable(map(dict.values, obs)), np.int64, len(group) * n)
-            desc = table[rows].reshape(len(group), n, 32)
+        store_rows = self.landmarks.rows
+        # landmarks grouped by their number of observations (a group's result does not depend on
+        # which landmarks share it: the index is computed per landmark)
+        for n in np.unique(n_used).tolist():
+            g = np.flatnonzero(n_used == n)
+            r = first[g][:, None] + np.arange(n)
+            desc = np.take(desc_table, row_of_kf[e_kf[r]] + e_kp[r], axis=0)   # ~8x cheaper than desc_table[...]
             best = distinctive_index(desc)
-            chosen = desc[np.arange(len(group)), best]
-            rows = self.landmarks.rows
-            if rows is not None:   # one scatter into the store's descriptor rows
-                rows.desc[np.fromiter(map(_ID, group), np.int64, len(group))] = chosen
+            chosen = desc[np.arange(len(g)), best]
+            lids = ids[sel[g]]
+            if store_rows is not None:   # one scatter into the store's descriptor rows
+                store_rows.desc[lids] = chosen
             else:
-                for lm, d in zip(group, chosen):
-                    lm.descriptor = d.copy()
+                for lid, d in zip(lids.tolist(), chosen):
+                    self.landmarks[lid].descriptor = d.copy()
 
     # ----------------------------------------------------------------- covisibility window
-    def _covisible(self, rec: Keyframe) -> dict[int, int]:
+    def _covisible(self, rec: Keyframe, table: ObservationTable | None = None) -> dict[int, int]:
         """Keyframe index -> landmarks it shares with ``rec`` (every reader orders the keyframes by
-        (count, index), so the dict's order is free: ascending here)."""
-        # the observing keyframes of all of rec's landmarks chained at C level into one array and counted
-        # by np.bincount (map over the store's __getitem__: no Python frame per landmark; a Counter over
-        # the chain cost ~0.9 ms per EuRoC keyframe with ~20 observers per landmark, this ~0.55)
-        obs = list(map(_OBS, map(self.landmarks.__getitem__, rec.landmark[rec.landmark >= 0].tolist())))
-        keys = np.fromiter(chain.from_iterable(obs), np.int64, sum(map(len, obs)))
+        (count, index), so the dict's order is free: ascending here). ``table``: current observations
+        of (at least) rec's landmarks (read here when None)."""
+        # the observing keyframes of all of rec's landmarks in one array, counted by np.bincount (a
+        # Counter over the chained dicts cost ~0.9 ms per EuRoC keyframe with ~20 observers per landmark)
+        ids = rec.landmark[rec.landmark >= 0]
+        keys = observation_reader(self.landmarks, ids, table).of(ids)[0]
         per_kf = np.bincount(keys) if len(keys) else np.zeros(0, np.int64)
         seen = np.flatnonzero(per_kf)
         counts = dict(zip(seen.tolist(), per_kf[seen].tolist()))
@@ -320,21 +337,23 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
                         counts[k] = counts.get(k, 0) + 1
         return counts
 
-    def _local_window(self, rec: Keyframe) -> tuple[list[int], list[int]]:
+    def _local_window(self, rec: Keyframe, table: ObservationTable | None = None) -> tuple[list[int], list[int]]:
         """Current keyframe + its strongest covisible neighbours (local, optimised) and the
-        other keyframes seeing their landmarks (fixed), as ORB-SLAM's LocalBundleAdjustment."""
+        other keyframes seeing their landmarks (fixed), as ORB-SLAM's LocalBundleAdjustment.
+        ``table``: current observations of rec's landmarks; the window's others are added to it."""
         p = self.params
-        counts = self._covisible(rec)
+        table = observation_reader(self.landmarks, (), table)
+        counts = self._covisible(rec, table)
         neigh = [k for k, c in counts.items() if c >= p.covisibility_min_shared
                  and self.keyframes[k].segment == rec.segment]
         neigh.sort(key=lambda k: (-counts[k], -k))
         local = [rec.index] + window_neighbours(self, rec, neigh)  # neigh[:window_size - 1] unless still_window's option
         local_set = set(local)
-        # the local keyframes' landmarks by one presence table, their observers chained into one array
-        # and made distinct there (sets built element by element cost ~1 ms per KITTI keyframe)
-        seen = _sorted_unique_ids(np.concatenate([self.keyframes[k].landmark for k in local])).tolist()
-        obs = list(map(_OBS, map(self.landmarks.__getitem__, seen)))
-        observers = np.fromiter(chain.from_iterable(obs), np.int64, sum(map(len, obs)))
+        # the local keyframes' landmarks by one presence table, their observers from the table and made
+        # distinct there (sets built element by element cost ~1 ms per KITTI keyframe)
+        seen = _sorted_unique_ids(np.concatenate([self.keyframes[k].landmark for k in local]))
+        table.add(seen)
+        observers = table.of(seen)[0]
         fixed_set = set(_sorted_unique_ids(observers).tolist()) - local_set
         first = self._segment_first[rec.segment]
         if first in local_set and len(local) > 1:  # the segment's first keyframe fixes the gauge
@@ -347,19 +366,25 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         """ORB-SLAM MapPointCulling for recent landmarks, plus landmarks left unobserved."""
         p = self.params
         bad = []
+        # the rule's numbers as locals and each landmark's dict by its slot (Landmark.obs is a property,
+        # ~0.12 us more a read): the loop visits every landmark (~6 k per KITTI keyframe)
+        order, segment, recent, ratio = rec.order, rec.segment, p.recent_age_keyframes, p.min_found_ratio
+        cull_age, min_obs = p.cull_age_keyframes, p.min_observations
+        tri_base = p.triangulate_id_base if p.triangulate_new_points else None
         for lid, lm in self.landmarks.items():
-            if not lm.obs:
+            obs = lm._obs
+            if not obs:
                 bad.append(lid)
                 continue
-            age = rec.order - lm.first_order
-            if lm.segment != rec.segment or age > p.recent_age_keyframes:
+            age = order - lm.first_order
+            if lm.segment != segment or age > recent:
                 continue
-            if lm.found < p.min_found_ratio * lm.visible:
+            if lm.found < ratio * lm.visible:
                 bad.append(lid)
-            elif age >= p.cull_age_keyframes and len(lm.obs) < p.min_observations:
+            elif age >= cull_age and len(obs) < min_obs:
                 bad.append(lid)
-            elif p.triangulate_new_points and lid >= p.triangulate_id_base and age >= p.cull_age_keyframes \
-                    and len(lm.obs) < p.triangulate_min_observations:
+            elif tri_base is not None and lid >= tri_base and age >= cull_age \
+                    and len(obs) < p.triangulate_min_observations:
                 bad.append(lid)   # a triangulated landmark starts with two observations
         for lid in bad:
             self._delete_landmark(lid)

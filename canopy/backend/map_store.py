@@ -8,11 +8,11 @@ whole map. A landmark's ``obs`` maps keyframe index -> keypoint row and the keyf
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from itertools import chain
 from operator import attrgetter
 
 import numpy as np
 
+from canopy.backend.observations import ObsDict, ObservationStore, ObservationTable, observation_reader
 from shared.arrays import unique_sorted
 
 
@@ -49,12 +49,12 @@ class Landmark:
     a copy and assigning them writes the row: the same values either way, and a position read
     before a BA keeps its value (as the array a landmark used to hold did)."""
 
-    __slots__ = ("id", "obs", "first_order", "segment", "visible", "found", "_rows", "_position", "_descriptor")
+    __slots__ = ("id", "_obs", "first_order", "segment", "visible", "found", "_rows", "_position", "_descriptor")
 
     def __init__(self, id: int, position, descriptor, obs: dict[int, int] | None = None, first_order: int = 0,
                  segment: int = 0, visible: int = 1, found: int = 1):
         self.id = id
-        self.obs = {} if obs is None else obs
+        self._obs = ObsDict() if obs is None else ObsDict(obs)
         self.first_order = first_order
         self.segment = segment
         self.visible = visible
@@ -62,6 +62,22 @@ class Landmark:
         self._rows = None
         self._position = position
         self._descriptor = descriptor
+
+    @property
+    def obs(self) -> "ObsDict":
+        """Keyframe index -> keypoint row, in insertion order (a dict; in a ``LandmarkStore`` its
+        changes are mirrored in the store's ``ObservationStore``)."""
+        return self._obs
+
+    @obs.setter
+    def obs(self, value) -> None:
+        old, new = self._obs, ObsDict(value)
+        store, lid = getattr(old, "_store", None), getattr(old, "_lid", -1)
+        old._store = None
+        self._obs = new
+        if store is not None:
+            new._store, new._lid = store, lid
+            store.load(np.array([lid], np.int64), [new])
 
     @property
     def position(self) -> np.ndarray:
@@ -99,8 +115,10 @@ class Landmark:
             self._position, self._descriptor = pos, desc
 
     def __getstate__(self):   # a pickled landmark carries its values, not its store's arrays
-        return {k: getattr(self, k) for k in ("id", "obs", "first_order", "segment", "visible", "found",
-                                               "position", "descriptor")}
+        state = {k: getattr(self, k) for k in ("id", "first_order", "segment", "visible", "found", "position",
+                                                "descriptor")}
+        state["obs"] = dict(self._obs)
+        return state
 
     def __setstate__(self, state) -> None:
         self.__init__(state["id"], state["position"], state["descriptor"], state["obs"], state["first_order"],
@@ -141,6 +159,8 @@ class LandmarkStore(dict):
     def __init__(self):
         super().__init__()
         self.rows: LandmarkRows | None = LandmarkRows()
+        # every landmark's observations in arrays (None: off, readers chain the dicts: ObservationTable)
+        self.observations: ObservationStore | None = ObservationStore()
 
     def __setitem__(self, lid, lm) -> None:
         if self.rows is not None and (lid != lm.id or lid < 0 or lid > _SPARSE * (len(self) + 1) + (1 << 20)):
@@ -150,7 +170,53 @@ class LandmarkStore(dict):
         if self.rows is not None:
             self.rows.reserve(lid)
         lm._attach(self.rows)
+        self._observe([lid], [lm])
+        old = dict.get(self, lid)
+        if old is not None and old is not lm:
+            old._obs._store = None
         super().__setitem__(lid, lm)
+
+    def _observe(self, ids: list, landmarks: list) -> None:
+        """Mirror the landmarks' observations in ``observations`` (turned off for good by an id beyond
+        the dense range: ``_DENSE_OBS``)."""
+        st = self.observations
+        if st is None or not ids:
+            return
+        top = max(ids)
+        if min(ids) < 0 or top > _DENSE_OBS * (len(self) + len(ids) + 1) + 4096:
+            for lm in self.values():
+                lm._obs._store = None
+            self.observations = None
+            return
+        obs = list(map(_OBS, landmarks))
+        for o, lid in zip(obs, ids):   # a landmark lives in one store (as its LandmarkRows)
+            o._store = st
+            o._lid = lid
+        st.load(np.asarray(ids, np.int64), obs)
+
+    def _forget(self, lm) -> None:
+        if lm is not None:
+            lm._obs._store = None
+
+    def pop(self, lid, *default):
+        lm = dict.pop(self, lid, *default)
+        if lm is not None and lm is not (default[0] if default else None):
+            self._forget(lm)
+        return lm
+
+    def __delitem__(self, lid) -> None:
+        self._forget(dict.get(self, lid))
+        dict.__delitem__(self, lid)
+
+    def popitem(self):
+        lid, lm = dict.popitem(self)
+        self._forget(lm)
+        return lid, lm
+
+    def clear(self) -> None:
+        for lm in self.values():
+            self._forget(lm)
+        dict.clear(self)
 
     def add_new(self, landmarks: list, positions: np.ndarray, descriptors: np.ndarray) -> None:
         """Store new landmarks (built with position and descriptor None) whose values are the rows
@@ -170,7 +236,9 @@ class LandmarkStore(dict):
         rows.desc[ids] = descriptors
         for lm in landmarks:
             lm._rows = rows
-        dict.update(self, zip(ids.tolist(), landmarks))
+        lids = ids.tolist()
+        self._observe(lids, landmarks)
+        dict.update(self, zip(lids, landmarks))
 
     def update(self, *args, **kwargs) -> None:
         for lid, lm in dict(*args, **kwargs).items():
@@ -183,8 +251,9 @@ class LandmarkStore(dict):
 
 
 _SPARSE = 64
+_DENSE_OBS = 64   # ObservationStore: ids up to 64 rows per stored landmark (triangulated ids from 1 << 20: off)
 _ID = attrgetter("id")
-_OBS = attrgetter("obs")
+_OBS = attrgetter("_obs")   # a Landmark's dict by its slot (Landmark.obs is a property)
 
 
 @dataclass
@@ -223,7 +292,7 @@ def local_map_update(index: int, keyframes: dict, landmarks: dict, local: list[i
     ids = _sorted_unique_ids(np.concatenate(seen)) if seen else np.zeros(0, np.int64)
     rows = getattr(landmarks, "rows", None)
     if rows is not None:   # a LandmarkStore: one gather per array (walking ~6 k landmarks cost ~3.5 ms per KITTI keyframe)
-        pos, desc = rows.pos[ids], rows.desc[ids]
+        pos, desc = np.take(rows.pos, ids, axis=0), np.take(rows.desc, ids, axis=0)   # np.take: ~5x a fancy index
     else:
         lms = [landmarks[i] for i in ids.tolist()]
         # one concatenate of the small arrays (1.5x faster than np.array over a list of arrays)
@@ -282,20 +351,18 @@ class MapStoreAccess:
                 lm.visible += vis
                 lm.found += fnd
 
-    def _observation_edges(self, local: list[int], kf_set: set[int]):
+    def _observation_edges(self, local: list[int], kf_set: set[int], table: ObservationTable | None = None):
         """Local BA's point edges: the landmarks the ``local`` keyframes observe (sorted ids) and
         every observation of them by a keyframe of ``kf_set``, as arrays (keyframe, landmark,
-        keypoint row). Returns (lm_ids, e_kf, e_lm, e_kp)."""
+        keypoint row). ``table``: a snapshot of the observations still current, where the store keeps
+        none (``observations.observation_reader``). Returns (lm_ids, e_kf, e_lm, e_kp)."""
         seen = [self.keyframes[k].landmark for k in local]
         lm_arr = _sorted_unique_ids(np.concatenate(seen)) if seen else np.zeros(0, np.int64)
         lm_ids = lm_arr.tolist()
-        # every landmark's observations in their dict order, keys and values chained at C level,
-        # then the window's by a lookup table (a generator over ~7 k edges cost ~3 ms per KITTI keyframe)
-        obs = list(map(_OBS, map(self.landmarks.__getitem__, lm_ids)))
-        n_obs = np.fromiter(map(len, obs), np.int64, len(obs))
-        total = int(n_obs.sum())
-        e_kf = np.fromiter(chain.from_iterable(obs), np.int64, total)
-        e_kp = np.fromiter(chain.from_iterable(map(dict.values, obs)), np.int64, total)
+        # every landmark's observations in their dict order by one gather (observations.py), then the
+        # window's by a lookup table (a generator over ~7 k edges cost ~3 ms per KITTI keyframe)
+        e_kf, e_kp, n_obs = observation_reader(self.landmarks, lm_arr, table).of(lm_arr)
+        total = len(e_kf)
         e_lm = np.repeat(lm_arr, n_obs)
         if total == 0 or not kf_set:
             keep = np.zeros(total, bool)
