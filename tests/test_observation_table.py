@@ -213,3 +213,21 @@ def test_sparse_ids_turn_the_store_off_and_the_readers_chain_the_dicts():
     assert mapper._covisible(rec) == before
     for got, want in zip(mapper._observation_edges([5, 4], {5, 4, 0}), edges):
         np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
+
+
+def test_the_store_turns_off_past_its_memory_budget_and_the_readers_agree(monkeypatch):
+    import canopy.backend.map_store as map_store
+    mapper, _ = _still_run(MappingParams(), n_kf=6, seed=2)
+    rec = mapper.keyframes[5]
+    before = mapper._covisible(rec)
+    edges = mapper._observation_edges([5, 4], {5, 4, 0})
+    st = mapper.landmarks.observations
+    assert st is not None
+    monkeypatch.setattr(map_store, "OBSERVATION_STORE_MAX_BYTES", st.kf.nbytes)   # the next landmarks pass it
+    nxt = max(mapper.landmarks) + 1
+    mapper.landmarks[nxt] = Landmark(nxt, np.zeros(3), np.zeros(32, np.uint8), {0: 0})
+    assert mapper.landmarks.observations is None                      # off for good
+    del mapper.landmarks[nxt]
+    assert mapper._covisible(rec) == before
+    for got, want in zip(mapper._observation_edges([5, 4], {5, 4, 0}), edges):
+        np.testing.assert_array_equal(np.asarray(got), np.asarray(want))

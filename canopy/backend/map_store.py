@@ -183,7 +183,11 @@ class LandmarkStore(dict):
         if st is None or not ids:
             return
         top = max(ids)
-        if min(ids) < 0 or top > _DENSE_OBS * (len(self) + len(ids) + 1) + 4096:
+        # off as well past the memory budget: rows span every id ever made (culled ones too) and are as
+        # wide as the most-observed landmark, so a long run with long-lived landmarks would grow them
+        # without bound; the dicts (ObservationTable) read the same values, only slower
+        if (min(ids) < 0 or top > _DENSE_OBS * (len(self) + len(ids) + 1) + 4096
+                or st.kf.nbytes + st.kp.nbytes > OBSERVATION_STORE_MAX_BYTES):
             for lm in self.values():
                 lm._obs._store = None
             self.observations = None
@@ -251,6 +255,9 @@ class LandmarkStore(dict):
 
 
 _SPARSE = 64
+# ObservationStore's arrays past this many bytes: off for good (checked as each keyframe's landmarks are
+# stored; one doubling may pass it before that). KITTI snippet 4.3 MB, EuRoC hover ~6 MB.
+OBSERVATION_STORE_MAX_BYTES = 256 << 20
 _DENSE_OBS = 64   # ObservationStore: ids up to 64 rows per stored landmark (triangulated ids from 1 << 20: off)
 _ID = attrgetter("id")
 _OBS = attrgetter("_obs")   # a Landmark's dict by its slot (Landmark.obs is a property)
