@@ -19,11 +19,12 @@ lambda_0 = 1e-5, factor 10, relative decrease tolerance 1e-5). Fixed keyframes a
 """
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 import numpy as np
 
-from canopy.frontend.geometry import se3_exp, stereo_point_jacobian
+from canopy.frontend.geometry import se3_exp
 from shared.types import StereoCalibration
 
 LAMBDA_INITIAL = 1e-5   # GTSAM LevenbergMarquardtParams defaults
@@ -46,19 +47,27 @@ class StereoEdges:
     huber: np.ndarray    # (E,) Huber width in whitened units
 
 
-def _project(T_cw: np.ndarray, X: np.ndarray, edges: StereoEdges, calib: StereoCalibration):
-    """Residuals (E,3), camera-frame points (E,3) and rotations (E,3,3) of every edge."""
+def _project(T_cw: np.ndarray, X: np.ndarray, edges: StereoEdges, calib: StereoCalibration,
+             work: "_Work | None" = None, slot: int = 0):
+    """Residuals (E,3), camera-frame points (E,3) and rotations (E,3,3) of every edge. With ``work``
+    they are written into its arrays of projection ``slot`` (LM keeps the accepted projection in
+    one slot while it tries a step in the other)."""
+    work = work or _Work()
+    E = len(edges.pose)
     # np.take from contiguous copies of the few poses' blocks: the same values as
     # T_cw[edges.pose, :3, :3] (mixed fancy index and slices), ~10x faster over ~7 k edges
-    R = np.take(np.ascontiguousarray(T_cw[:, :3, :3]), edges.pose, axis=0)
-    Pc = _mv(R, np.take(X, edges.point, axis=0)) + np.take(np.ascontiguousarray(T_cw[:, :3, 3]), edges.pose, axis=0)
+    R = _take(np.ascontiguousarray(T_cw[:, :3, :3]), edges.pose, work.get(f"R{slot}", (E, 3, 3)))
+    Pc = _mv(R, _take(X, edges.point, work.get("X_e", (E, 3))), out=work.get(f"Pc{slot}", (E, 3)))
+    Pc += _take(np.ascontiguousarray(T_cw[:, :3, 3]), edges.pose, work.get("t_e", (E, 3)))
     z = Pc[:, 2]
     front = z > _MIN_DEPTH
     iz = np.where(front, 1.0 / np.where(front, z, 1.0), 0.0)
     u = calib.fx * Pc[:, 0] * iz + calib.cx
     v = calib.fy * Pc[:, 1] * iz + calib.cy
     ur = u - calib.bf * iz
-    r = edges.meas - np.stack([u, v, ur], axis=1)
+    r = work.get(f"r{slot}", (E, 3))
+    for c, pred in enumerate((u, v, ur)):
+        np.subtract(edges.meas[:, c], pred, out=r[:, c])
     r[:, 2] *= edges.stereo
     r[~front] = 0.0
     return r, Pc, R, front
@@ -66,7 +75,10 @@ def _project(T_cw: np.ndarray, X: np.ndarray, edges: StereoEdges, calib: StereoC
 
 def _robust_cost(r: np.ndarray, front: np.ndarray, edges: StereoEdges) -> tuple[float, np.ndarray]:
     """Huber cost of all edges and the IRLS weight of every edge (0 behind the camera)."""
-    e = np.sqrt((r**2).sum(axis=1)) / edges.sigma
+    # the squared norm summed over the columns as (r0^2 + r1^2) + r2^2, the order numpy's row sum
+    # of three takes, on contiguous columns: the same values at ~1/5 of the cost (issue 8)
+    rt = np.ascontiguousarray(r.T)
+    e = np.sqrt(rt[0] * rt[0] + rt[1] * rt[1] + rt[2] * rt[2]) / edges.sigma
     k = edges.huber
     inside = e <= k
     cost = float(np.where(inside, 0.5 * e**2, k * e - 0.5 * k**2)[front].sum())
@@ -75,22 +87,33 @@ def _robust_cost(r: np.ndarray, front: np.ndarray, edges: StereoEdges) -> tuple[
 
 
 def _jacobians(Pc: np.ndarray, R: np.ndarray, edges: StereoEdges, calib: StereoCalibration,
-               loc: np.ndarray | None = None):
-    """d(u,v,ur)/dxi (E,3,6) for a left perturbation of T_cam_world, and d(u,v,ur)/dX (E,3,3);
-    with ``loc`` the pose Jacobians of those edges only (the fixed poses' are never used)."""
-    Jp = stereo_point_jacobian(Pc, calib, _MIN_DEPTH)
-    Jp[:, 2, :] *= edges.stereo[:, None]
-    Jpl, Pcl = (Jp, Pc) if loc is None else (np.take(Jp, loc, axis=0), np.take(Pc, loc, axis=0))
+               loc: np.ndarray, work: "_Work") -> tuple[np.ndarray, np.ndarray]:
+    """d(u,v,ur)/dxi (m,3,6) of the edges ``loc`` (those of optimised poses) for a left perturbation
+    of T_cam_world, and d(u,v,ur)/dX (E,3,3) of all edges."""
+    # the six non-zero entries of ``stereo_point_jacobian(Pc, calib, _MIN_DEPTH)`` (its expressions,
+    # so the same values; tests/test_ba_cost.py compares them), the u_r row times the stereo flag,
+    # as contiguous vectors: written into a (E,3,3) array whose zeros are set once per BA call, they
+    # replace a zeroed (E,3,3) allocation, six strided writes and a broadcast (E,3) product (issue 8)
+    x, y = Pc[:, 0], Pc[:, 1]
+    iz = 1.0 / np.maximum(Pc[:, 2], _MIN_DEPTH)
+    iz2 = iz * iz
+    stereo = work.stereo(edges)
+    comps = (calib.fx * iz, -calib.fx * x * iz2, calib.fy * iz, -calib.fy * y * iz2,
+             calib.fx * iz * stereo, -calib.fx * (x - calib.baseline) * iz2 * stereo)
+    Jp = work.get("Jp", (len(Pc), 3, 3), zero=True)
+    for (r, c), v in zip(_JP_ENTRIES, comps):
+        Jp[:, r, c] = v
+    Jx = np.matmul(Jp, R, out=work.get("Jx", Jp.shape))
     # dPc/dxi = [-[Pc]x | I]: row r of Jc is (Pc x Jp_r, Jp_r). Jp's rows have a zero each
     # (d u_l/dy = d v/dx = d u_r/dy = 0, ``stereo_point_jacobian``), so the cross products are
     # written out without those terms, on contiguous vectors (the full (m,3) column products on
     # strided views cost ~1 ms per linearisation on KITTI, these ~0.2 ms; a dropped term was an
     # exact zero, so the values are the same up to the sign of an exact zero)
-    x, y, z = (np.ascontiguousarray(Pcl[:, i]) for i in range(3))
-    j00, j02, j11, j12, j20, j22 = (np.ascontiguousarray(Jpl[:, r, c])
-                                    for r, c in ((0, 0), (0, 2), (1, 1), (1, 2), (2, 0), (2, 2)))
-    Jc = np.zeros((len(Pcl), 3, 6))
-    Jc[:, :, 3:] = Jpl
+    x, y, z = (np.take(Pc[:, i], loc) for i in range(3))
+    j00, j02, j11, j12, j20, j22 = (np.take(v, loc) for v in comps)
+    Jc = work.get("Jc", (len(loc), 3, 6), zero=True)    # its zeros: d(u_l)/dy, d(v)/dx, d(u_r)/dy
+    for (r, c), v in zip(_JP_ENTRIES, (j00, j02, j11, j12, j20, j22)):
+        Jc[:, r, 3 + c] = v
     Jc[:, 0, 0] = j02 * y
     Jc[:, 0, 1] = j00 * z - j02 * x
     Jc[:, 0, 2] = -j00 * y
@@ -100,7 +123,63 @@ def _jacobians(Pc: np.ndarray, R: np.ndarray, edges: StereoEdges, calib: StereoC
     Jc[:, 2, 0] = j22 * y
     Jc[:, 2, 1] = j20 * z - j22 * x
     Jc[:, 2, 2] = -j20 * y
-    return Jc, Jp @ R
+    return Jc, Jx
+
+
+_JP_ENTRIES = ((0, 0), (0, 2), (1, 1), (1, 2), (2, 0), (2, 2))   # the non-zero entries of d(u,v,ur)/dPc
+
+
+class _Work:
+    """Work arrays by name, kept from one BA call to the next of the same thread (``_work``). The
+    window's edges and points stay the same through all LM iterations, and the next window is
+    about as large: reusing the arrays replaces ~30 temporaries of 0.1-1.7 MB per iteration, whose
+    first touches fault pages in (glibc maps and unmaps blocks that large; ~0.8 ms of system CPU
+    per KITTI call, and ~3 ms once they are all kept for one call only, issue 8). An array asked
+    with ``zero`` is zeroed at its first use in a call (``begin``); its users write the same
+    entries at every iteration of the call, so the others stay zero."""
+
+    def __init__(self):
+        self._flat: dict[str, np.ndarray] = {}
+        self._zeroed: set[str] = set()
+        self._stereo: np.ndarray | None = None
+
+    def begin(self, edges: StereoEdges) -> "_Work":
+        """Start a BA call on ``edges``."""
+        self._zeroed.clear()
+        self._stereo = edges.stereo.astype(float)   # the factor ``Jp[:, 2, :] *= edges.stereo`` applies
+        return self
+
+    def get(self, name: str, shape: tuple, zero: bool = False) -> np.ndarray:
+        n = int(np.prod(shape))
+        flat = self._flat.get(name)
+        if flat is None or len(flat) < n:
+            flat = self._flat[name] = np.empty(n + n // 4)   # room for a somewhat larger next window
+        a = flat[:n].reshape(shape)
+        if zero and name not in self._zeroed:
+            a.fill(0.0)
+            self._zeroed.add(name)
+        return a
+
+    def stereo(self, edges: StereoEdges) -> np.ndarray:
+        if self._stereo is None:
+            self.begin(edges)
+        return self._stereo
+
+
+_THREAD = threading.local()
+
+
+def _work() -> _Work:
+    """This thread's work arrays (a BA call runs in one thread; two threads never share them)."""
+    w = getattr(_THREAD, "work", None)
+    if w is None:
+        w = _THREAD.work = _Work()
+    return w
+
+
+def _take(a: np.ndarray, idx: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """``np.take(a, idx, axis=0)`` into ``out`` (``mode="clip"``: unbuffered; the indices are valid)."""
+    return np.take(a, idx, axis=0, out=out, mode="clip")
 
 
 class _Groups:
@@ -136,7 +215,8 @@ class _Groups:
 @dataclass
 class _Structure:
     """What stays fixed while LM iterates over one edge set: local edges, their points and poses
-    (where the blocks of the Schur complement's point-major matrices go), groupings."""
+    (where the blocks of the Schur complement's point-major matrices go), groupings, and the
+    point-major work matrices themselves (their zero pattern is the same at every iteration)."""
 
     loc: np.ndarray          # indices of edges whose pose is optimised
     by_point: _Groups        # all edges by point
@@ -147,42 +227,68 @@ class _Structure:
     n_points: int
     n_local: int
     unique: bool             # no point seen twice by one local pose (then a scatter needs no sums)
+    work: _Work              # this call's work arrays
+    flat: np.ndarray | None = None    # unique: where (edge, j, k) of a (m,6,3) block goes in point_major
 
     @staticmethod
-    def build(edges: StereoEdges, n_local: int, n_points: int) -> "_Structure":
+    def build(edges: StereoEdges, n_local: int, n_points: int, work: _Work) -> "_Structure":
         loc = np.flatnonzero(edges.pose < n_local)
         pts, kf = edges.point[loc], edges.pose[loc]
         # no (point, pose) key twice: one bincount over the P x L keys (np.unique sorted ~15 k keys per call)
         unique = len(loc) == 0 or int(np.bincount(pts * n_local + kf).max()) <= 1
-        return _Structure(loc, _Groups(edges.point, n_points), _Groups(kf, n_local), _Groups(pts, n_points),
-                          pts, kf, n_points, n_local, unique)
+        st = _Structure(loc, _Groups(edges.point, n_points), _Groups(kf, n_local), _Groups(pts, n_points),
+                        pts, kf, n_points, n_local, unique, work)
+        if unique:
+            # flat index of element (p, k, l, j) of the (n, 3, L, 6) point-major array for every
+            # (edge, j, k) of a C-contiguous (m, 6, 3) block stack: each LM step then writes its
+            # blocks with one flat scatter into matrices zeroed once per call (every step writes
+            # the same positions), where ``out[pts, :, kf] = blocks.transpose(0, 2, 1)`` into a
+            # freshly zeroed matrix cost ~1.2 ms per KITTI linearisation (issue 8)
+            # ((p * 3 + k) * L + l) * 6 + j = (p * 3 L + l) * 6 + (k * 6 L + j): an offset per edge
+            # plus one per (j, k)
+            jk = np.arange(3)[None, :] * (6 * n_local) + np.arange(6)[:, None]
+            st.flat = ((pts * (3 * n_local) + kf) * 6)[:, None] + jk.reshape(1, -1)
+            st.flat = st.flat.reshape(-1)
+        return st
 
-    def point_major(self, blocks: np.ndarray) -> np.ndarray:
+    def chunked_shape(self) -> tuple[int, int, int]:
+        n = -(-self.n_points // POINTS_PER_CHUNK) * POINTS_PER_CHUNK
+        return n // POINTS_PER_CHUNK, 3 * POINTS_PER_CHUNK, 6 * self.n_local
+
+    def point_major(self, blocks: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """The (3 P, 6 L) matrix whose (point, pose) 3x6 block is the transpose of the local edge's
         (6,3) block, zero where the pose does not see the point (blocks of one point and pose
         summed), cut into chunks of ``POINTS_PER_CHUNK`` points (padded with zero rows):
         (chunks, 3 POINTS_PER_CHUNK, 6 L). Products of the chunks stay below OpenBLAS's
         threading threshold: one (6L x 3P) GEMM goes multi-threaded, and its spinning threads
-        cost 100+ ms of CPU per call on a loaded 2-core machine (1 ms single-threaded)."""
-        n = -(-self.n_points // POINTS_PER_CHUNK) * POINTS_PER_CHUNK
-        out = np.zeros((n, 3, self.n_local, 6))
+        cost 100+ ms of CPU per call on a loaded 2-core machine (1 ms single-threaded).
+        With ``out`` (unique structures only: a zeroed array of that shape, or one this wrote the
+        same structure's blocks into before) the blocks are written into it."""
+        if out is not None:
+            out.reshape(-1)[self.flat] = np.ascontiguousarray(blocks).reshape(-1)
+            return out
+        shape = self.chunked_shape()
+        out = np.zeros((shape[0] * POINTS_PER_CHUNK, 3, self.n_local, 6))
         pts, kf = self.loc_point, self.loc_pose
         if self.unique:
             out[pts, :, kf] = blocks.transpose(0, 2, 1)
         else:
             np.add.at(out, (pts, slice(None), kf), blocks.transpose(0, 2, 1))
-        return out.reshape(n // POINTS_PER_CHUNK, 3 * POINTS_PER_CHUNK, 6 * self.n_local)
+        return out.reshape(shape)
 
 
-def _mv(M: np.ndarray, v: np.ndarray) -> np.ndarray:
+def _mv(M: np.ndarray, v: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """Batched matrix-vector product (matmul on stacks of small matrices beats einsum ~10x).
     ``np.matvec`` (numpy >= 2.2) is the same gufunc loop as ``(M @ v[..., None])[..., 0]``, bit for
     bit, without the trailing unit axis (issue 8: ~25 % less per call on KITTI's ~7 k edges)."""
-    return _MATVEC(M, v)
+    return _MATVEC(M, v, out=out)
 
 
-def _matvec_by_matmul(M: np.ndarray, v: np.ndarray) -> np.ndarray:
-    return (M @ v[..., None])[..., 0]
+def _matvec_by_matmul(M: np.ndarray, v: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    if out is None:
+        return (M @ v[..., None])[..., 0]
+    np.matmul(M, v[..., None], out=out[..., None])
+    return out
 
 
 _MATVEC = getattr(np, "matvec", _matvec_by_matmul)
@@ -215,21 +321,26 @@ _UPPER3 = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 GRAM_ROWS = 3072   # rows per GEMM in _pose_blocks: 6 x 6 x 3072 stays below OpenBLAS's threading threshold
 
 
-def _point_blocks(Jx: np.ndarray, w: np.ndarray, Wr: np.ndarray, groups: "_Groups") -> tuple[np.ndarray, np.ndarray]:
+def _point_blocks(Jx: np.ndarray, w: np.ndarray, Wr: np.ndarray, groups: "_Groups",
+                  work: _Work | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Per point: H_pp = sum_e w_e Jx_e^T Jx_e (3x3) and b_p = sum_e Jx_e^T (w_e r_e) (Triggs et al.
     2000, §6.1: the point blocks of the normal equations). Computed from the Jacobians' nine
     components as contiguous vectors over the edges: the six distinct entries of the symmetric
     block and the three of b_p are 45 vector operations, where one batched 3x3 matmul per edge
     (a BLAS call each) cost ~4x more on KITTI's ~5 k edges (issue 8). Same sums, rounded differently."""
-    J = np.ascontiguousarray(Jx.reshape(-1, 9).T)        # J[3k + i] = d(residual k)/d(X_i)
-    Jw = J * w
-    cols = np.empty((9, len(w)))
+    E, work = len(w), work or _Work()
+    J = work.get("J", (9, E))                             # J[3k + i] = d(residual k)/d(X_i)
+    np.copyto(J, Jx.reshape(-1, 9).T)
+    Jw = np.multiply(J, w, out=work.get("Jw", (9, E)))
+    cols = work.get("cols", (9, E))
     for c, (i, j) in enumerate(_UPPER3):
         cols[c] = Jw[i] * J[j] + Jw[3 + i] * J[3 + j] + Jw[6 + i] * J[6 + j]
     Wrt = np.ascontiguousarray(Wr.T)
     for i in range(3):
         cols[6 + i] = J[i] * Wrt[0] + J[3 + i] * Wrt[1] + J[6 + i] * Wrt[2]
-    sums = groups.sum(np.ascontiguousarray(cols.T))      # (P, 9)
+    colsT = work.get("colsT", (E, 9))
+    np.copyto(colsT, cols.T)
+    sums = groups.sum(colsT)                              # (P, 9)
     H = np.empty((len(sums), 3, 3))
     for c, (i, j) in enumerate(_UPPER3):
         H[:, i, j] = sums[:, c]
@@ -237,7 +348,8 @@ def _point_blocks(Jx: np.ndarray, w: np.ndarray, Wr: np.ndarray, groups: "_Group
     return H, np.ascontiguousarray(sums[:, 6:])
 
 
-def _pose_blocks(Jc: np.ndarray, wl: np.ndarray, Wr: np.ndarray, groups: "_Groups") -> tuple[np.ndarray, np.ndarray]:
+def _pose_blocks(Jc: np.ndarray, wl: np.ndarray, Wr: np.ndarray, groups: "_Groups",
+                 work: _Work | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Per local pose: H_cc = sum_e w_e Jc_e^T Jc_e (6x6) and b_c = sum_e Jc_e^T (w_e r_e), as one
     (6 x 3n)(3n x 6) GEMM and one GEMV over the pose's n edges stacked, in chunks of ``GRAM_ROWS``
     rows (a 6x3x6 matmul per edge and their sums cost ~1.5 ms per linearisation on KITTI; these
@@ -247,8 +359,14 @@ def _pose_blocks(Jc: np.ndarray, wl: np.ndarray, Wr: np.ndarray, groups: "_Group
     if not len(groups.starts):
         return H, b
     order = groups.order
-    A = np.take(Jc, order, axis=0).reshape(-1, 6)
-    Aw = np.take(Jc * wl, order, axis=0).reshape(-1, 6)
+    m, work = len(order), work or _Work()
+    A = _take(Jc, order, work.get("Jc_by_pose", Jc.shape))
+    # the weights on the gathered rows, as an (m,18) x (m,1) product: the same products as
+    # ``take(Jc * wl)``, whose (m,3,6) x (m,1,1) broadcast runs numpy's inner loop over 6 elements
+    # at a time (issue 8)
+    Aw = np.multiply(A.reshape(m, -1), np.take(wl.reshape(-1), order)[:, None],
+                     out=work.get("Jcw_by_pose", (m, 18))).reshape(-1, 6)
+    A = A.reshape(-1, 6)
     rw = np.take(Wr, order, axis=0).reshape(-1)
     ends = np.r_[groups.starts[1:], len(order)]
     for key, a, e in zip(groups.keys.tolist(), (3 * groups.starts).tolist(), (3 * ends).tolist()):
@@ -267,53 +385,57 @@ class _Linearised:
         """``projected``: ``_project`` of this (T_cw, X) and its ``_robust_cost``, when LM has just
         computed them to accept the step."""
         if projected is None:
-            r, Pc, R, front = _project(T_cw, X, edges, calib)
+            r, Pc, R, front = _project(T_cw, X, edges, calib, st.work)
             projected = (r, Pc, R, front), _robust_cost(r, front, edges)
         (r, Pc, R, front), (self.cost, w) = projected
         self.projection = projected[0]
-        loc = st.loc
-        Jc, Jx = _jacobians(Pc, R, edges, calib, loc)                    # Jc: local edges only
+        loc, work = st.loc, st.work
+        Jc, Jx = _jacobians(Pc, R, edges, calib, loc, work)               # Jc: local edges only
         Wr = r * w[:, None]
-        self.Hpp, self.bp = _point_blocks(Jx, w, Wr, st.by_point)
+        self.Hpp, self.bp = _point_blocks(Jx, w, Wr, st.by_point, work)
         JlT = Jc.transpose(0, 2, 1)
         wl = np.take(w, loc)[:, None, None]
-        self.Hcc, self.bc = _pose_blocks(Jc, wl, np.take(Wr, loc, axis=0), st.loc_by_pose)
-        self.Hcp = JlT @ (np.take(Jx, loc, axis=0) * wl)                  # (m,6,3)
+        self.Hcc, self.bc = _pose_blocks(Jc, wl, np.take(Wr, loc, axis=0), st.loc_by_pose, work)
+        m = len(loc)
+        Jxw = _take(Jx, loc, work.get("Jxw", (m, 3, 3)))
+        np.multiply(Jxw.reshape(m, 9), wl.reshape(m, 1), out=Jxw.reshape(m, 9))  # = take(Jx, loc) * wl
+        self.Hcp = np.matmul(JlT, Jxw, out=work.get("Hcp", (m, 6, 3)))     # (m,6,3)
         self.pts, self.kf = edges.point[loc], edges.pose[loc]
         self.n_local = n_local
         self.st = st
         self._W = None
 
-    def _point_major_pair(self, Hpp_inv: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _point_major_pair(self, A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``point_major`` of H_cp and of A = H_cp Hpp^-1. W does not depend on the damping, so it is
         built once per linearisation (LM may solve several times at one point). Where no point is
-        seen twice by one pose, V's block (point p, pose l) is Hpp^-1[p] W's: one batched (3x3)(3x6L)
-        product per point instead of a second scatter into a zeroed matrix (Hpp^-1 is exactly
-        symmetric, so the products and their order are A's; identical results on recorded KITTI BAs)."""
+        seen twice by one pose, V's block (point p, pose l) is Hpp^-1[p] W's = A_e^T for the edge e
+        of (p, l): Hpp^-1 is exactly symmetric (``_inv_sym3``), so A_e = H_cp,e Hpp^-1[p] is made of
+        the same products summed in the same order as Hpp^-1[p] H_pc,e (OpenBLAS: one FMA chain
+        over the inner index in both), and V is A scattered, bit for bit what the batched
+        (3x3)(3x6L) product per point gave at ~1/5 of its cost (issue 8)."""
         st = self.st
-        if self._W is None:
-            self._W = st.point_major(self.Hcp)
-        W = self._W
         if not st.unique:
-            return W, st.point_major(A)
-        n_chunks, rows, cols = W.shape
-        Hinv = np.zeros((n_chunks * rows // 3, 3, 3))
-        Hinv[: len(Hpp_inv)] = Hpp_inv
-        V = np.matmul(Hinv, W.reshape(-1, 3, cols)).reshape(n_chunks, rows, cols)
-        return W, V
+            if self._W is None:
+                self._W = st.point_major(self.Hcp)
+            return self._W, st.point_major(A)
+        if self._W is None:
+            self._W = st.point_major(self.Hcp, st.work.get("W", st.chunked_shape(), zero=True))
+        return self._W, st.point_major(A, st.work.get("V", st.chunked_shape(), zero=True))
 
     def solve(self, lam: float) -> tuple[np.ndarray, np.ndarray]:
         """Damped step: (n_local,6) pose increments and (P,3) point increments."""
         L, st = self.n_local, self.st
         Hpp_inv = _inv_sym3(self.Hpp, lam)
-        A = self.Hcp @ np.take(Hpp_inv, self.pts, axis=0)              # (m,6,3) H_cp Hpp^-1
+        m = len(self.pts)
+        A = np.matmul(self.Hcp, _take(Hpp_inv, self.pts, st.work.get("Hinv_e", (m, 3, 3))),
+                      out=st.work.get("A", (m, 6, 3)))                     # (m,6,3) H_cp Hpp^-1
         # reduced camera system S = H_cc + lam I - sum over points of H_cp Hpp^-1 H_pc, the sum as
         # the (6L x 3P) (3P x 6L) product of the point-major matrices W = [H_pc] and
         # V = [Hpp^-1 H_pc] (zero where a pose does not see the point): a few dense products
         # instead of one 6x3x6 product per pair of edges on a point (KITTI: ~24 k pairs; the
         # reduction 14 -> ~2 ms per solve)
-        W, V = self._point_major_pair(Hpp_inv, A)
-        S = -np.matmul(W.transpose(0, 2, 1), V).sum(axis=0)
+        W, V = self._point_major_pair(A)
+        S = -np.matmul(W.transpose(0, 2, 1), V, out=st.work.get("S_chunks", (len(W),) + W.shape[2:] * 2)).sum(axis=0)
         S4 = S.reshape(L, 6, L, 6)
         idx = np.arange(L)
         S4[idx, :, idx, :] += self.Hcc + lam * np.eye(6)
@@ -361,9 +483,10 @@ def bundle_adjust_points(T_cw: np.ndarray, n_local: int, X: np.ndarray, edges: S
     if len(edges.pose) == 0:
         return T_cw, X, 0
     lam = LAMBDA_INITIAL
-    st = _Structure.build(edges, n_local, len(X))
+    st = _Structure.build(edges, n_local, len(X), _work().begin(edges))
     lin = _Linearised(T_cw, X, edges, n_local, calib, st)
-    current = lin.projection      # the projection at (T_cw, X)
+    current = lin.projection      # the projection at (T_cw, X), in slot 0 of st.work
+    slot = 1                      # where a step's projection goes
     it = 0
     for it in range(1, max_iterations + 1):
         accepted = False
@@ -374,7 +497,7 @@ def bundle_adjust_points(T_cw: np.ndarray, n_local: int, X: np.ndarray, edges: S
                 lam *= LAMBDA_FACTOR
                 continue
             T_try, X_try = _apply(T_cw, X, dc, dp)
-            proj = _project(T_try, X_try, edges, calib)
+            proj = _project(T_try, X_try, edges, calib, st.work, slot)
             robust = _robust_cost(proj[0], proj[3], edges)
             if robust[0] < lin.cost:
                 accepted = True
@@ -384,7 +507,7 @@ def bundle_adjust_points(T_cw: np.ndarray, n_local: int, X: np.ndarray, edges: S
             break
         old = lin.cost
         T_cw, X = T_try, X_try
-        current = proj
+        current, slot = proj, 1 - slot
         lam = max(lam / LAMBDA_FACTOR, 1e-12)
         # converged or out of iterations: stop before linearising at the new point (its Jacobians
         # would be used by no further step)
@@ -392,5 +515,5 @@ def bundle_adjust_points(T_cw: np.ndarray, n_local: int, X: np.ndarray, edges: S
             break
         lin = _Linearised(T_cw, X, edges, n_local, calib, st, projected=(proj, robust))
     if final_projection is not None:
-        final_projection.append(current[:2])
+        final_projection.append(tuple(a.copy() for a in current[:2]))   # the next call reuses the arrays
     return T_cw, X, it
