@@ -19,6 +19,7 @@ lambda_0 = 1e-5, factor 10, relative decrease tolerance 1e-5). Fixed keyframes a
 """
 from __future__ import annotations
 
+import math
 import threading
 from dataclasses import dataclass
 
@@ -48,16 +49,21 @@ class StereoEdges:
 
 
 def _project(T_cw: np.ndarray, X: np.ndarray, edges: StereoEdges, calib: StereoCalibration,
-             work: "_Work | None" = None, slot: int = 0):
-    """Residuals (E,3), camera-frame points (E,3) and rotations (E,3,3) of every edge. With ``work``
-    they are written into its arrays of projection ``slot`` (LM keeps the accepted projection in
-    one slot while it tries a step in the other)."""
-    work = work or _Work()
+             st: "_Structure | None" = None, slot: int = 0):
+    """Residuals (E,3), camera-frame points (E,3) of every edge, the poses' rotations (n,3,3) and
+    which edges see their point in front. With ``st`` they are written into its work arrays of
+    projection ``slot`` (LM keeps the accepted projection in one slot while it tries a step in the
+    other)."""
+    work = st.work if st is not None else _Work()
     E = len(edges.pose)
-    # np.take from contiguous copies of the few poses' blocks: the same values as
-    # T_cw[edges.pose, :3, :3] (mixed fancy index and slices), ~10x faster over ~7 k edges
-    R = _take(np.ascontiguousarray(T_cw[:, :3, :3]), edges.pose, work.get(f"R{slot}", (E, 3, 3)))
-    Pc = _mv(R, _take(X, edges.point, work.get("X_e", (E, 3))), out=work.get(f"Pc{slot}", (E, 3)))
+    R = np.ascontiguousarray(T_cw[:, :3, :3])
+    Pc = work.get(f"Pc{slot}", (E, 3))
+    if st is not None:
+        st.by_pose.rotate(R, X, Pc, work)
+    else:
+        # np.take from contiguous copies of the few poses' blocks: the same values as
+        # T_cw[edges.pose, :3, :3] (mixed fancy index and slices), ~10x faster over ~7 k edges
+        _mv(np.take(R, edges.pose, axis=0), np.take(X, edges.point, axis=0), out=Pc)
     Pc += _take(np.ascontiguousarray(T_cw[:, :3, 3]), edges.pose, work.get("t_e", (E, 3)))
     z = Pc[:, 2]
     front = z > _MIN_DEPTH
@@ -86,31 +92,33 @@ def _robust_cost(r: np.ndarray, front: np.ndarray, edges: StereoEdges) -> tuple[
     return cost, np.where(front, w, 0.0)
 
 
-def _jacobians(Pc: np.ndarray, R: np.ndarray, edges: StereoEdges, calib: StereoCalibration,
-               loc: np.ndarray, work: "_Work") -> tuple[np.ndarray, np.ndarray]:
-    """d(u,v,ur)/dxi (m,3,6) of the edges ``loc`` (those of optimised poses) for a left perturbation
-    of T_cam_world, and d(u,v,ur)/dX (E,3,3) of all edges."""
+def _jacobians(Pc: np.ndarray, R: np.ndarray, calib: StereoCalibration, st: "_Structure") -> tuple[np.ndarray, np.ndarray]:
+    """d(u,v,ur)/dxi (m,3,6) of the local edges ``st.loc`` for a left perturbation of T_cam_world,
+    and d(u,v,ur)/dX (E,3,3) of all edges; ``R``: the poses' rotations (n,3,3)."""
     # the six non-zero entries of ``stereo_point_jacobian(Pc, calib, _MIN_DEPTH)`` (its expressions,
     # so the same values; tests/test_ba_cost.py compares them), the u_r row times the stereo flag,
-    # as contiguous vectors: written into a (E,3,3) array whose zeros are set once per BA call, they
-    # replace a zeroed (E,3,3) allocation, six strided writes and a broadcast (E,3) product (issue 8)
-    x, y = Pc[:, 0], Pc[:, 1]
-    iz = 1.0 / np.maximum(Pc[:, 2], _MIN_DEPTH)
+    # as contiguous vectors in the edges' pose order: written into a (E,3,3) array whose zeros are
+    # set once per BA call, they replace a zeroed (E,3,3) allocation, six strided writes and a
+    # broadcast (E,3) product (issue 8)
+    by_pose, work, loc = st.by_pose, st.work, st.loc
+    Ps = _take(Pc, by_pose.order, work.get("Pc_by_pose", Pc.shape))
+    x, y = Ps[:, 0], Ps[:, 1]
+    iz = 1.0 / np.maximum(Ps[:, 2], _MIN_DEPTH)
     iz2 = iz * iz
-    stereo = work.stereo(edges)
+    stereo = by_pose.stereo
     comps = (calib.fx * iz, -calib.fx * x * iz2, calib.fy * iz, -calib.fy * y * iz2,
              calib.fx * iz * stereo, -calib.fx * (x - calib.baseline) * iz2 * stereo)
-    Jp = work.get("Jp", (len(Pc), 3, 3), zero=True)
+    Jp = work.get("Jp_by_pose", (len(Pc), 3, 3), zero=True)
     for (r, c), v in zip(_JP_ENTRIES, comps):
         Jp[:, r, c] = v
-    Jx = np.matmul(Jp, R, out=work.get("Jx", Jp.shape))
+    Jx = by_pose.rotate_jacobians(Jp, R, work.get("Jx", Jp.shape), work)
     # dPc/dxi = [-[Pc]x | I]: row r of Jc is (Pc x Jp_r, Jp_r). Jp's rows have a zero each
     # (d u_l/dy = d v/dx = d u_r/dy = 0, ``stereo_point_jacobian``), so the cross products are
     # written out without those terms, on contiguous vectors (the full (m,3) column products on
     # strided views cost ~1 ms per linearisation on KITTI, these ~0.2 ms; a dropped term was an
     # exact zero, so the values are the same up to the sign of an exact zero)
     x, y, z = (np.take(Pc[:, i], loc) for i in range(3))
-    j00, j02, j11, j12, j20, j22 = (np.take(v, loc) for v in comps)
+    j00, j02, j11, j12, j20, j22 = (np.take(v, st.loc_by_pose_index) for v in comps)
     Jc = work.get("Jc", (len(loc), 3, 6), zero=True)    # its zeros: d(u_l)/dy, d(v)/dx, d(u_r)/dy
     for (r, c), v in zip(_JP_ENTRIES, (j00, j02, j11, j12, j20, j22)):
         Jc[:, r, 3 + c] = v
@@ -129,6 +137,50 @@ def _jacobians(Pc: np.ndarray, R: np.ndarray, edges: StereoEdges, calib: StereoC
 _JP_ENTRIES = ((0, 0), (0, 2), (1, 1), (1, 2), (2, 0), (2, 2))   # the non-zero entries of d(u,v,ur)/dPc
 
 
+_GEMV_ORDER = [1, 0, 2]   # the order in which OpenBLAS's 3x3 GEMV sums its products (see _ByPose.rotate)
+
+
+class _ByPose:
+    """All edges grouped by pose, for the products whose matrix is the edge's pose's rotation: one
+    GEMM per pose over its edges stacked, where numpy's batched matmul / matvec made one BLAS call
+    per edge (~30 ns each, ~6 k edges per KITTI projection and linearisation, issue 8). OpenBLAS
+    sums a GEMM's products in one FMA chain along the inner index, as it does in the per-edge
+    calls, so the values are the same, bit for bit (tests/test_ba_cost.py)."""
+
+    def __init__(self, edges: StereoEdges):
+        self.order = np.argsort(edges.pose, kind="stable")
+        keys = edges.pose[self.order]
+        starts = np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]]) if len(keys) else np.zeros(0, np.int64)
+        ends = np.r_[starts[1:], len(keys)]
+        self.runs = list(zip(keys[starts].tolist(), starts.tolist(), ends.tolist()))
+        self.inverse = np.empty_like(self.order)
+        self.inverse[self.order] = np.arange(len(self.order))
+        self.point = edges.point[self.order]
+        self.stereo = edges.stereo[self.order].astype(float)   # what ``Jp[:, 2, :] *= edges.stereo`` multiplies by
+
+    def rotate(self, R: np.ndarray, X: np.ndarray, out: np.ndarray, work: "_Work") -> np.ndarray:
+        """out[e] = R[pose e] X[point e] (E,3), as ``np.matvec`` per edge gives it: OpenBLAS's 3x3 GEMV
+        sums the products of columns 1, 0, 2 in that order, so the GEMM takes the points' coordinates
+        and the rotation's columns in that order. A pose with one edge: numpy makes a (1x3)(3x3)
+        product a GEMV of other shape, so that edge keeps ``np.matvec``."""
+        Xs = _take(np.ascontiguousarray(X[:, _GEMV_ORDER]), self.point, work.get("X_by_pose", out.shape))
+        Ps = work.get("RX_by_pose", out.shape)
+        for k, a, b in self.runs:
+            if b - a > 1:
+                np.matmul(Xs[a:b], R[k][:, _GEMV_ORDER].T, out=Ps[a:b])
+            else:
+                Ps[a] = _mv(R[k], X[self.point[a]])
+        return _take(Ps, self.inverse, out)
+
+    def rotate_jacobians(self, Jp: np.ndarray, R: np.ndarray, out: np.ndarray, work: "_Work") -> np.ndarray:
+        """out[e] = Jp[e] R[pose e] (E,3,3) for ``Jp`` in the pose order, as ``Jp @ R`` per edge gives it
+        (the same 3x3 inner products, one FMA chain each), back in the edges' order."""
+        Js = work.get("Jx_by_pose", out.shape)
+        for k, a, b in self.runs:
+            np.matmul(Jp[a:b].reshape(-1, 3), R[k], out=Js[a:b].reshape(-1, 3))
+        return _take(Js, self.inverse, out)
+
+
 class _Work:
     """Work arrays by name, kept from one BA call to the next of the same thread (``_work``). The
     window's edges and points stay the same through all LM iterations, and the next window is
@@ -141,16 +193,14 @@ class _Work:
     def __init__(self):
         self._flat: dict[str, np.ndarray] = {}
         self._zeroed: set[str] = set()
-        self._stereo: np.ndarray | None = None
 
-    def begin(self, edges: StereoEdges) -> "_Work":
-        """Start a BA call on ``edges``."""
+    def begin(self) -> "_Work":
+        """Start a BA call."""
         self._zeroed.clear()
-        self._stereo = edges.stereo.astype(float)   # the factor ``Jp[:, 2, :] *= edges.stereo`` applies
         return self
 
     def get(self, name: str, shape: tuple, zero: bool = False) -> np.ndarray:
-        n = int(np.prod(shape))
+        n = math.prod(shape)
         flat = self._flat.get(name)
         if flat is None or len(flat) < n:
             flat = self._flat[name] = np.empty(n + n // 4)   # room for a somewhat larger next window
@@ -159,11 +209,6 @@ class _Work:
             a.fill(0.0)
             self._zeroed.add(name)
         return a
-
-    def stereo(self, edges: StereoEdges) -> np.ndarray:
-        if self._stereo is None:
-            self.begin(edges)
-        return self._stereo
 
 
 _THREAD = threading.local()
@@ -228,6 +273,8 @@ class _Structure:
     n_local: int
     unique: bool             # no point seen twice by one local pose (then a scatter needs no sums)
     work: _Work              # this call's work arrays
+    by_pose: _ByPose         # all edges by pose
+    loc_by_pose_index: np.ndarray   # where the local edges are in by_pose's order
     flat: np.ndarray | None = None    # unique: where (edge, j, k) of a (m,6,3) block goes in point_major
 
     @staticmethod
@@ -236,8 +283,9 @@ class _Structure:
         pts, kf = edges.point[loc], edges.pose[loc]
         # no (point, pose) key twice: one bincount over the P x L keys (np.unique sorted ~15 k keys per call)
         unique = len(loc) == 0 or int(np.bincount(pts * n_local + kf).max()) <= 1
+        by_pose = _ByPose(edges)
         st = _Structure(loc, _Groups(edges.point, n_points), _Groups(kf, n_local), _Groups(pts, n_points),
-                        pts, kf, n_points, n_local, unique, work)
+                        pts, kf, n_points, n_local, unique, work, by_pose, by_pose.inverse[loc])
         if unique:
             # flat index of element (p, k, l, j) of the (n, 3, L, 6) point-major array for every
             # (edge, j, k) of a C-contiguous (m, 6, 3) block stack: each LM step then writes its
@@ -385,12 +433,12 @@ class _Linearised:
         """``projected``: ``_project`` of this (T_cw, X) and its ``_robust_cost``, when LM has just
         computed them to accept the step."""
         if projected is None:
-            r, Pc, R, front = _project(T_cw, X, edges, calib, st.work)
+            r, Pc, R, front = _project(T_cw, X, edges, calib, st)
             projected = (r, Pc, R, front), _robust_cost(r, front, edges)
         (r, Pc, R, front), (self.cost, w) = projected
         self.projection = projected[0]
         loc, work = st.loc, st.work
-        Jc, Jx = _jacobians(Pc, R, edges, calib, loc, work)               # Jc: local edges only
+        Jc, Jx = _jacobians(Pc, R, calib, st)                              # Jc: local edges only
         Wr = r * w[:, None]
         self.Hpp, self.bp = _point_blocks(Jx, w, Wr, st.by_point, work)
         JlT = Jc.transpose(0, 2, 1)
@@ -483,7 +531,7 @@ def bundle_adjust_points(T_cw: np.ndarray, n_local: int, X: np.ndarray, edges: S
     if len(edges.pose) == 0:
         return T_cw, X, 0
     lam = LAMBDA_INITIAL
-    st = _Structure.build(edges, n_local, len(X), _work().begin(edges))
+    st = _Structure.build(edges, n_local, len(X), _work().begin())
     lin = _Linearised(T_cw, X, edges, n_local, calib, st)
     current = lin.projection      # the projection at (T_cw, X), in slot 0 of st.work
     slot = 1                      # where a step's projection goes
@@ -497,7 +545,7 @@ def bundle_adjust_points(T_cw: np.ndarray, n_local: int, X: np.ndarray, edges: S
                 lam *= LAMBDA_FACTOR
                 continue
             T_try, X_try = _apply(T_cw, X, dc, dp)
-            proj = _project(T_try, X_try, edges, calib, st.work, slot)
+            proj = _project(T_try, X_try, edges, calib, st, slot)
             robust = _robust_cost(proj[0], proj[3], edges)
             if robust[0] < lin.cost:
                 accepted = True
