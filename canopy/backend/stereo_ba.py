@@ -148,7 +148,7 @@ class _ByPose:
     calls, so the values are the same, bit for bit (tests/test_ba_cost.py)."""
 
     def __init__(self, edges: StereoEdges):
-        self.order = np.argsort(edges.pose, kind="stable")
+        self.order = _stable_order(edges.pose)
         keys = edges.pose[self.order]
         starts = np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]]) if len(keys) else np.zeros(0, np.int64)
         ends = np.r_[starts[1:], len(keys)]
@@ -222,6 +222,14 @@ def _work() -> _Work:
     return w
 
 
+def _stable_order(keys: np.ndarray) -> np.ndarray:
+    """``np.argsort(keys, kind="stable")`` (a stable order is unique); keys below 2^16 as uint16,
+    which numpy sorts by radix (~6x faster than int64 on ~6 k pose indices)."""
+    if len(keys) and 0 <= keys.min() and keys.max() < 1 << 16:
+        keys = keys.astype(np.uint16)
+    return np.argsort(keys, kind="stable")
+
+
 def _take(a: np.ndarray, idx: np.ndarray, out: np.ndarray) -> np.ndarray:
     """``np.take(a, idx, axis=0)`` into ``out`` (``mode="clip"``: unbuffered; the indices are valid)."""
     return np.take(a, idx, axis=0, out=out, mode="clip")
@@ -234,7 +242,7 @@ class _Groups:
     ``np.take``: the same values as fancy indexing, 2-4x faster on ~7 k small blocks.)"""
 
     def __init__(self, keys: np.ndarray, n: int):
-        self.order = np.argsort(keys, kind="stable")
+        self.order = _stable_order(keys)
         ks = keys[self.order]
         self.starts = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]]) if len(ks) else np.zeros(0, np.int64)
         self.keys = ks[self.starts]
