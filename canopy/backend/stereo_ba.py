@@ -246,6 +246,7 @@ class _Groups:
         ks = keys[self.order]
         self.starts = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]]) if len(ks) else np.zeros(0, np.int64)
         self.keys = ks[self.starts]
+        self.ends = np.r_[self.starts[1:], len(ks)]
         self.n = n
         # local BA's edges come sorted by point (``_observation_edges``: by landmark id), and every
         # point has an edge: then the sums need neither the reordering gather nor the scatter
@@ -424,8 +425,7 @@ def _pose_blocks(Jc: np.ndarray, wl: np.ndarray, Wr: np.ndarray, groups: "_Group
                      out=work.get("Jcw_by_pose", (m, 18))).reshape(-1, 6)
     A = A.reshape(-1, 6)
     rw = np.take(Wr, order, axis=0).reshape(-1)
-    ends = np.r_[groups.starts[1:], len(order)]
-    for key, a, e in zip(groups.keys.tolist(), (3 * groups.starts).tolist(), (3 * ends).tolist()):
+    for key, a, e in zip(groups.keys.tolist(), (3 * groups.starts).tolist(), (3 * groups.ends).tolist()):
         for c in range(a, e, GRAM_ROWS):
             d = min(c + GRAM_ROWS, e)
             H[key] += A[c:d].T @ Aw[c:d]
