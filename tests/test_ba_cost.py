@@ -98,7 +98,7 @@ def test_schur_blocks_v_scattered_from_a_equal_the_per_point_product():
         A = Hcp @ np.take(Hinv, st.loc_point, axis=0)
         W = st.point_major(Hcp, st.work.get("W", st.chunked_shape(), zero=True))
         V = st.point_major(A, st.work.get("V", st.chunked_shape(), zero=True))
-        assert _same(W, st.point_major(Hcp))               # the scatter into a fresh zeroed matrix
+        assert _same(W, st.point_major(Hcp))               # np.add.at into a fresh zeroed matrix
         n_chunks, rows, cols = W.shape
         Hpad = np.zeros((n_chunks * rows // 3, 3, 3))
         Hpad[: len(Hinv)] = Hinv

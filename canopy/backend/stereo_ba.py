@@ -50,10 +50,9 @@ class StereoEdges:
 
 def _project(T_cw: np.ndarray, X: np.ndarray, edges: StereoEdges, calib: StereoCalibration,
              st: "_Structure | None" = None, slot: int = 0):
-    """Residuals (E,3), camera-frame points (E,3) of every edge, the poses' rotations (n,3,3) and
-    which edges see their point in front. With ``st`` they are written into its work arrays of
-    projection ``slot`` (LM keeps the accepted projection in one slot while it tries a step in the
-    other)."""
+    """Residuals (E,3) and camera-frame points (E,3) of every edge, the poses' rotations (n,3,3), and
+    which edges have their point in front; with ``st`` in its work arrays of projection ``slot``
+    (LM keeps the accepted projection in one slot and tries a step in the other)."""
     work = st.work if st is not None else _Work()
     E = len(edges.pose)
     R = np.ascontiguousarray(T_cw[:, :3, :3])
@@ -95,11 +94,9 @@ def _robust_cost(r: np.ndarray, front: np.ndarray, edges: StereoEdges) -> tuple[
 def _jacobians(Pc: np.ndarray, R: np.ndarray, calib: StereoCalibration, st: "_Structure") -> tuple[np.ndarray, np.ndarray]:
     """d(u,v,ur)/dxi (m,3,6) of the local edges ``st.loc`` for a left perturbation of T_cam_world,
     and d(u,v,ur)/dX (E,3,3) of all edges; ``R``: the poses' rotations (n,3,3)."""
-    # the six non-zero entries of ``stereo_point_jacobian(Pc, calib, _MIN_DEPTH)`` (its expressions,
-    # so the same values; tests/test_ba_cost.py compares them), the u_r row times the stereo flag,
-    # as contiguous vectors in the edges' pose order: written into a (E,3,3) array whose zeros are
-    # set once per BA call, they replace a zeroed (E,3,3) allocation, six strided writes and a
-    # broadcast (E,3) product (issue 8)
+    # the six non-zero entries of ``stereo_point_jacobian(Pc, calib, _MIN_DEPTH)`` by its expressions
+    # (the u_r row times the stereo flag), as vectors in the edges' pose order, written into an
+    # (E,3,3) array zeroed once per call (tests/test_ba_cost.py: the same bytes)
     by_pose, work, loc = st.by_pose, st.work, st.loc
     Ps = _take(Pc, by_pose.order, work.get("Pc_by_pose", Pc.shape))
     x, y = Ps[:, 0], Ps[:, 1]
@@ -112,11 +109,8 @@ def _jacobians(Pc: np.ndarray, R: np.ndarray, calib: StereoCalibration, st: "_St
     for (r, c), v in zip(_JP_ENTRIES, comps):
         Jp[:, r, c] = v
     Jx = by_pose.rotate_jacobians(Jp, R, work.get("Jx", Jp.shape), work)
-    # dPc/dxi = [-[Pc]x | I]: row r of Jc is (Pc x Jp_r, Jp_r). Jp's rows have a zero each
-    # (d u_l/dy = d v/dx = d u_r/dy = 0, ``stereo_point_jacobian``), so the cross products are
-    # written out without those terms, on contiguous vectors (the full (m,3) column products on
-    # strided views cost ~1 ms per linearisation on KITTI, these ~0.2 ms; a dropped term was an
-    # exact zero, so the values are the same up to the sign of an exact zero)
+    # dPc/dxi = [-[Pc]x | I]: row r of Jc is (Pc x Jp_r, Jp_r), written out without the terms of
+    # Jp's zeros (d u_l/dy = d v/dx = d u_r/dy = 0) on contiguous vectors
     x, y, z = (np.take(Pc[:, i], loc) for i in range(3))
     j00, j02, j11, j12, j20, j22 = (np.take(v, st.loc_by_pose_index) for v in comps)
     Jc = work.get("Jc", (len(loc), 3, 6), zero=True)    # its zeros: d(u_l)/dy, d(v)/dx, d(u_r)/dy
@@ -141,11 +135,10 @@ _GEMV_ORDER = [1, 0, 2]   # the order in which OpenBLAS's 3x3 GEMV sums its prod
 
 
 class _ByPose:
-    """All edges grouped by pose, for the products whose matrix is the edge's pose's rotation: one
-    GEMM per pose over its edges stacked, where numpy's batched matmul / matvec made one BLAS call
-    per edge (~30 ns each, ~6 k edges per KITTI projection and linearisation, issue 8). OpenBLAS
-    sums a GEMM's products in one FMA chain along the inner index, as it does in the per-edge
-    calls, so the values are the same, bit for bit (tests/test_ba_cost.py)."""
+    """All edges by pose, for the products with the pose's rotation: one GEMM per pose over its edges
+    stacked, where numpy's batched matmul / matvec made one BLAS call per edge (~30 ns each, ~6 k
+    edges per KITTI projection, issue 8). OpenBLAS sums a GEMM's products in one FMA chain along the
+    inner index, as in the per-edge calls: the same bytes (tests/test_ba_cost.py)."""
 
     def __init__(self, edges: StereoEdges):
         self.order = _stable_order(edges.pose)
@@ -159,10 +152,9 @@ class _ByPose:
         self.stereo = edges.stereo[self.order].astype(float)   # what ``Jp[:, 2, :] *= edges.stereo`` multiplies by
 
     def rotate(self, R: np.ndarray, X: np.ndarray, out: np.ndarray, work: "_Work") -> np.ndarray:
-        """out[e] = R[pose e] X[point e] (E,3), as ``np.matvec`` per edge gives it: OpenBLAS's 3x3 GEMV
-        sums the products of columns 1, 0, 2 in that order, so the GEMM takes the points' coordinates
-        and the rotation's columns in that order. A pose with one edge: numpy makes a (1x3)(3x3)
-        product a GEMV of other shape, so that edge keeps ``np.matvec``."""
+        """out[e] = R[pose e] X[point e] (E,3) as ``np.matvec`` gives it: OpenBLAS's 3x3 GEMV sums the
+        products of columns 1, 0, 2 in that order, so the GEMM takes them in that order. numpy makes a
+        (1x3)(3x3) product a GEMV of another shape: a pose's only edge keeps ``np.matvec``."""
         Xs = _take(np.ascontiguousarray(X[:, _GEMV_ORDER]), self.point, work.get("X_by_pose", out.shape))
         Ps = work.get("RX_by_pose", out.shape)
         for k, a, b in self.runs:
@@ -182,12 +174,10 @@ class _ByPose:
 
 
 class _Work:
-    """Work arrays by name, kept from one BA call to the next of the same thread (``_work``). The
-    window's edges and points stay the same through all LM iterations, and the next window is
-    about as large: reusing the arrays replaces ~30 temporaries of 0.1-1.7 MB per iteration, whose
-    first touches fault pages in (glibc maps and unmaps blocks that large; ~0.8 ms of system CPU
-    per KITTI call, and ~3 ms once they are all kept for one call only, issue 8). An array asked
-    with ``zero`` is zeroed at its first use in a call (``begin``); its users write the same
+    """Work arrays by name, kept from one BA call to the next in a thread (``_work``): they replace
+    ~30 temporaries of 0.1-1.7 MB per LM iteration, which glibc maps afresh, so that their pages
+    fault in (~0.8 ms system CPU per KITTI call; ~3 ms if kept for one call only, issue 8). An array
+    asked ``zero`` is zeroed at its first use in a call (``begin``); its users write the same
     entries at every iteration of the call, so the others stay zero."""
 
     def __init__(self):
@@ -269,8 +259,7 @@ class _Groups:
 @dataclass
 class _Structure:
     """What stays fixed while LM iterates over one edge set: local edges, their points and poses
-    (where the blocks of the Schur complement's point-major matrices go), groupings, and the
-    point-major work matrices themselves (their zero pattern is the same at every iteration)."""
+    (where the blocks of the Schur complement's point-major matrices go), groupings, work arrays."""
 
     loc: np.ndarray          # indices of edges whose pose is optimised
     by_point: _Groups        # all edges by point
@@ -296,16 +285,10 @@ class _Structure:
         st = _Structure(loc, _Groups(edges.point, n_points), _Groups(kf, n_local), _Groups(pts, n_points),
                         pts, kf, n_points, n_local, unique, work, by_pose, by_pose.inverse[loc])
         if unique:
-            # flat index of element (p, k, l, j) of the (n, 3, L, 6) point-major array for every
-            # (edge, j, k) of a C-contiguous (m, 6, 3) block stack: each LM step then writes its
-            # blocks with one flat scatter into matrices zeroed once per call (every step writes
-            # the same positions), where ``out[pts, :, kf] = blocks.transpose(0, 2, 1)`` into a
-            # freshly zeroed matrix cost ~1.2 ms per KITTI linearisation (issue 8)
-            # ((p * 3 + k) * L + l) * 6 + j = (p * 3 L + l) * 6 + (k * 6 L + j): an offset per edge
-            # plus one per (j, k)
+            # where element (edge, j, k) of an (m,6,3) block stack goes in the (n,3,L,6) point-major
+            # matrix: ((p * 3 + k) * L + l) * 6 + j = (p * 3L + l) * 6 + (k * 6L + j)
             jk = np.arange(3)[None, :] * (6 * n_local) + np.arange(6)[:, None]
-            st.flat = ((pts * (3 * n_local) + kf) * 6)[:, None] + jk.reshape(1, -1)
-            st.flat = st.flat.reshape(-1)
+            st.flat = (((pts * (3 * n_local) + kf) * 6)[:, None] + jk.reshape(1, -1)).reshape(-1)
         return st
 
     def chunked_shape(self) -> tuple[int, int, int]:
@@ -319,18 +302,15 @@ class _Structure:
         (chunks, 3 POINTS_PER_CHUNK, 6 L). Products of the chunks stay below OpenBLAS's
         threading threshold: one (6L x 3P) GEMM goes multi-threaded, and its spinning threads
         cost 100+ ms of CPU per call on a loaded 2-core machine (1 ms single-threaded).
-        With ``out`` (unique structures only: a zeroed array of that shape, or one this wrote the
-        same structure's blocks into before) the blocks are written into it."""
+        ``out``, unique structures only: a zeroed array of that shape (or one this structure's blocks
+        went into), written by one flat scatter (a fresh zeroed matrix and ``out[pts, :, kf] =
+        blocks.transpose(0, 2, 1)`` cost ~2x more per KITTI linearisation, issue 8)."""
         if out is not None:
             out.reshape(-1)[self.flat] = np.ascontiguousarray(blocks).reshape(-1)
             return out
         shape = self.chunked_shape()
         out = np.zeros((shape[0] * POINTS_PER_CHUNK, 3, self.n_local, 6))
-        pts, kf = self.loc_point, self.loc_pose
-        if self.unique:
-            out[pts, :, kf] = blocks.transpose(0, 2, 1)
-        else:
-            np.add.at(out, (pts, slice(None), kf), blocks.transpose(0, 2, 1))
+        np.add.at(out, (self.loc_point, slice(None), self.loc_pose), blocks.transpose(0, 2, 1))
         return out.reshape(shape)
 
 
@@ -462,13 +442,11 @@ class _Linearised:
         self._W = None
 
     def _point_major_pair(self, A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``point_major`` of H_cp and of A = H_cp Hpp^-1. W does not depend on the damping, so it is
-        built once per linearisation (LM may solve several times at one point). Where no point is
-        seen twice by one pose, V's block (point p, pose l) is Hpp^-1[p] W's = A_e^T for the edge e
-        of (p, l): Hpp^-1 is exactly symmetric (``_inv_sym3``), so A_e = H_cp,e Hpp^-1[p] is made of
-        the same products summed in the same order as Hpp^-1[p] H_pc,e (OpenBLAS: one FMA chain
-        over the inner index in both), and V is A scattered, bit for bit what the batched
-        (3x3)(3x6L) product per point gave at ~1/5 of its cost (issue 8)."""
+        """``point_major`` of H_cp (once per linearisation: LM may solve several times at one point)
+        and of A = H_cp Hpp^-1. Where no point is seen twice by one pose, V's block (p, l) is A_e^T:
+        Hpp^-1 is exactly symmetric (``_inv_sym3``), so A_e sums the products of Hpp^-1[p] H_pc,e in
+        the same order (one FMA chain in OpenBLAS), bit for bit without a (3x3)(3x6L) BLAS call per
+        point and a zero-padded copy of Hpp^-1."""
         st = self.st
         if not st.unique:
             if self._W is None:
