@@ -19,11 +19,13 @@ lambda_0 = 1e-5, factor 10, relative decrease tolerance 1e-5). Fixed keyframes a
 """
 from __future__ import annotations
 
+import math
+import threading
 from dataclasses import dataclass
 
 import numpy as np
 
-from canopy.frontend.geometry import se3_exp, stereo_point_jacobian
+from canopy.frontend.geometry import se3_exp
 from shared.types import StereoCalibration
 
 LAMBDA_INITIAL = 1e-5   # GTSAM LevenbergMarquardtParams defaults
@@ -46,19 +48,31 @@ class StereoEdges:
     huber: np.ndarray    # (E,) Huber width in whitened units
 
 
-def _project(T_cw: np.ndarray, X: np.ndarray, edges: StereoEdges, calib: StereoCalibration):
-    """Residuals (E,3), camera-frame points (E,3) and rotations (E,3,3) of every edge."""
-    # np.take from contiguous copies of the few poses' blocks: the same values as
-    # T_cw[edges.pose, :3, :3] (mixed fancy index and slices), ~10x faster over ~7 k edges
-    R = np.take(np.ascontiguousarray(T_cw[:, :3, :3]), edges.pose, axis=0)
-    Pc = _mv(R, np.take(X, edges.point, axis=0)) + np.take(np.ascontiguousarray(T_cw[:, :3, 3]), edges.pose, axis=0)
+def _project(T_cw: np.ndarray, X: np.ndarray, edges: StereoEdges, calib: StereoCalibration,
+             st: "_Structure | None" = None, slot: int = 0):
+    """Residuals (E,3) and camera-frame points (E,3) of every edge, the poses' rotations (n,3,3), and
+    which edges have their point in front; with ``st`` in its work arrays of projection ``slot``
+    (LM keeps the accepted projection in one slot and tries a step in the other)."""
+    work = st.work if st is not None else _Work()
+    E = len(edges.pose)
+    R = np.ascontiguousarray(T_cw[:, :3, :3])
+    Pc = work.get(f"Pc{slot}", (E, 3))
+    if st is not None:
+        st.by_pose.rotate(R, X, Pc, work)
+    else:
+        # np.take from contiguous copies of the few poses' blocks: the same values as
+        # T_cw[edges.pose, :3, :3] (mixed fancy index and slices), ~10x faster over ~7 k edges
+        _mv(np.take(R, edges.pose, axis=0), np.take(X, edges.point, axis=0), out=Pc)
+    Pc += _take(np.ascontiguousarray(T_cw[:, :3, 3]), edges.pose, work.get("t_e", (E, 3)))
     z = Pc[:, 2]
     front = z > _MIN_DEPTH
     iz = np.where(front, 1.0 / np.where(front, z, 1.0), 0.0)
     u = calib.fx * Pc[:, 0] * iz + calib.cx
     v = calib.fy * Pc[:, 1] * iz + calib.cy
     ur = u - calib.bf * iz
-    r = edges.meas - np.stack([u, v, ur], axis=1)
+    r = work.get(f"r{slot}", (E, 3))
+    for c, pred in enumerate((u, v, ur)):
+        np.subtract(edges.meas[:, c], pred, out=r[:, c])
     r[:, 2] *= edges.stereo
     r[~front] = 0.0
     return r, Pc, R, front
@@ -66,7 +80,10 @@ def _project(T_cw: np.ndarray, X: np.ndarray, edges: StereoEdges, calib: StereoC
 
 def _robust_cost(r: np.ndarray, front: np.ndarray, edges: StereoEdges) -> tuple[float, np.ndarray]:
     """Huber cost of all edges and the IRLS weight of every edge (0 behind the camera)."""
-    e = np.sqrt((r**2).sum(axis=1)) / edges.sigma
+    # the squared norm summed over the columns as (r0^2 + r1^2) + r2^2, the order numpy's row sum
+    # of three takes, on contiguous columns: the same values at ~1/5 of the cost (issue 8)
+    rt = np.ascontiguousarray(r.T)
+    e = np.sqrt(rt[0] * rt[0] + rt[1] * rt[1] + rt[2] * rt[2]) / edges.sigma
     k = edges.huber
     inside = e <= k
     cost = float(np.where(inside, 0.5 * e**2, k * e - 0.5 * k**2)[front].sum())
@@ -74,23 +91,31 @@ def _robust_cost(r: np.ndarray, front: np.ndarray, edges: StereoEdges) -> tuple[
     return cost, np.where(front, w, 0.0)
 
 
-def _jacobians(Pc: np.ndarray, R: np.ndarray, edges: StereoEdges, calib: StereoCalibration,
-               loc: np.ndarray | None = None):
-    """d(u,v,ur)/dxi (E,3,6) for a left perturbation of T_cam_world, and d(u,v,ur)/dX (E,3,3);
-    with ``loc`` the pose Jacobians of those edges only (the fixed poses' are never used)."""
-    Jp = stereo_point_jacobian(Pc, calib, _MIN_DEPTH)
-    Jp[:, 2, :] *= edges.stereo[:, None]
-    Jpl, Pcl = (Jp, Pc) if loc is None else (np.take(Jp, loc, axis=0), np.take(Pc, loc, axis=0))
-    # dPc/dxi = [-[Pc]x | I]: row r of Jc is (Pc x Jp_r, Jp_r). Jp's rows have a zero each
-    # (d u_l/dy = d v/dx = d u_r/dy = 0, ``stereo_point_jacobian``), so the cross products are
-    # written out without those terms, on contiguous vectors (the full (m,3) column products on
-    # strided views cost ~1 ms per linearisation on KITTI, these ~0.2 ms; a dropped term was an
-    # exact zero, so the values are the same up to the sign of an exact zero)
-    x, y, z = (np.ascontiguousarray(Pcl[:, i]) for i in range(3))
-    j00, j02, j11, j12, j20, j22 = (np.ascontiguousarray(Jpl[:, r, c])
-                                    for r, c in ((0, 0), (0, 2), (1, 1), (1, 2), (2, 0), (2, 2)))
-    Jc = np.zeros((len(Pcl), 3, 6))
-    Jc[:, :, 3:] = Jpl
+def _jacobians(Pc: np.ndarray, R: np.ndarray, calib: StereoCalibration, st: "_Structure") -> tuple[np.ndarray, np.ndarray]:
+    """d(u,v,ur)/dxi (m,3,6) of the local edges ``st.loc`` for a left perturbation of T_cam_world,
+    and d(u,v,ur)/dX (E,3,3) of all edges; ``R``: the poses' rotations (n,3,3)."""
+    # the six non-zero entries of ``stereo_point_jacobian(Pc, calib, _MIN_DEPTH)`` by its expressions
+    # (the u_r row times the stereo flag), as vectors in the edges' pose order, written into an
+    # (E,3,3) array zeroed once per call (tests/test_ba_cost.py: the same bytes)
+    by_pose, work, loc = st.by_pose, st.work, st.loc
+    Ps = _take(Pc, by_pose.order, work.get("Pc_by_pose", Pc.shape))
+    x, y = Ps[:, 0], Ps[:, 1]
+    iz = 1.0 / np.maximum(Ps[:, 2], _MIN_DEPTH)
+    iz2 = iz * iz
+    stereo = by_pose.stereo
+    comps = (calib.fx * iz, -calib.fx * x * iz2, calib.fy * iz, -calib.fy * y * iz2,
+             calib.fx * iz * stereo, -calib.fx * (x - calib.baseline) * iz2 * stereo)
+    Jp = work.get("Jp_by_pose", (len(Pc), 3, 3), zero=True)
+    for (r, c), v in zip(_JP_ENTRIES, comps):
+        Jp[:, r, c] = v
+    Jx = by_pose.rotate_jacobians(Jp, R, work.get("Jx", Jp.shape), work)
+    # dPc/dxi = [-[Pc]x | I]: row r of Jc is (Pc x Jp_r, Jp_r), written out without the terms of
+    # Jp's zeros (d u_l/dy = d v/dx = d u_r/dy = 0) on contiguous vectors
+    x, y, z = (np.take(Pc[:, i], loc) for i in range(3))
+    j00, j02, j11, j12, j20, j22 = (np.take(v, st.loc_by_pose_index) for v in comps)
+    Jc = work.get("Jc", (len(loc), 3, 6), zero=True)    # its zeros: d(u_l)/dy, d(v)/dx, d(u_r)/dy
+    for (r, c), v in zip(_JP_ENTRIES, (j00, j02, j11, j12, j20, j22)):
+        Jc[:, r, 3 + c] = v
     Jc[:, 0, 0] = j02 * y
     Jc[:, 0, 1] = j00 * z - j02 * x
     Jc[:, 0, 2] = -j00 * y
@@ -100,7 +125,104 @@ def _jacobians(Pc: np.ndarray, R: np.ndarray, edges: StereoEdges, calib: StereoC
     Jc[:, 2, 0] = j22 * y
     Jc[:, 2, 1] = j20 * z - j22 * x
     Jc[:, 2, 2] = -j20 * y
-    return Jc, Jp @ R
+    return Jc, Jx
+
+
+_JP_ENTRIES = ((0, 0), (0, 2), (1, 1), (1, 2), (2, 0), (2, 2))   # the non-zero entries of d(u,v,ur)/dPc
+
+
+_GEMV_ORDER = [1, 0, 2]   # the order in which OpenBLAS's 3x3 GEMV sums its products (see _ByPose.rotate)
+
+
+class _ByPose:
+    """All edges by pose, for the products with the pose's rotation: one GEMM per pose over its edges
+    stacked, where numpy's batched matmul / matvec made one BLAS call per edge (~30 ns each, ~6 k
+    edges per KITTI projection, issue 8). OpenBLAS sums a GEMM's products in one FMA chain along the
+    inner index, as in the per-edge calls: the same bytes (tests/test_ba_cost.py)."""
+
+    def __init__(self, edges: StereoEdges):
+        self.order = _stable_order(edges.pose)
+        keys = edges.pose[self.order]
+        starts = np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]]) if len(keys) else np.zeros(0, np.int64)
+        ends = np.r_[starts[1:], len(keys)]
+        self.runs = list(zip(keys[starts].tolist(), starts.tolist(), ends.tolist()))
+        self.inverse = np.empty_like(self.order)
+        self.inverse[self.order] = np.arange(len(self.order))
+        self.point = edges.point[self.order]
+        self.stereo = edges.stereo[self.order].astype(float)   # what ``Jp[:, 2, :] *= edges.stereo`` multiplies by
+
+    def rotate(self, R: np.ndarray, X: np.ndarray, out: np.ndarray, work: "_Work") -> np.ndarray:
+        """out[e] = R[pose e] X[point e] (E,3) as ``np.matvec`` gives it: OpenBLAS's 3x3 GEMV sums the
+        products of columns 1, 0, 2 in that order, so the GEMM takes them in that order. numpy makes a
+        (1x3)(3x3) product a GEMV of another shape: a pose's only edge keeps ``np.matvec``."""
+        Xs = _take(np.ascontiguousarray(X[:, _GEMV_ORDER]), self.point, work.get("X_by_pose", out.shape))
+        Ps = work.get("RX_by_pose", out.shape)
+        for k, a, b in self.runs:
+            if b - a > 1:
+                np.matmul(Xs[a:b], R[k][:, _GEMV_ORDER].T, out=Ps[a:b])
+            else:
+                Ps[a] = _mv(R[k], X[self.point[a]])
+        return _take(Ps, self.inverse, out)
+
+    def rotate_jacobians(self, Jp: np.ndarray, R: np.ndarray, out: np.ndarray, work: "_Work") -> np.ndarray:
+        """out[e] = Jp[e] R[pose e] (E,3,3) for ``Jp`` in the pose order, as ``Jp @ R`` per edge gives it
+        (the same 3x3 inner products, one FMA chain each), back in the edges' order."""
+        Js = work.get("Jx_by_pose", out.shape)
+        for k, a, b in self.runs:
+            np.matmul(Jp[a:b].reshape(-1, 3), R[k], out=Js[a:b].reshape(-1, 3))
+        return _take(Js, self.inverse, out)
+
+
+class _Work:
+    """Work arrays by name, kept from one BA call to the next in a thread (``_work``): they replace
+    ~30 temporaries of 0.1-1.7 MB per LM iteration, which glibc maps afresh, so that their pages
+    fault in (~0.8 ms system CPU per KITTI call; ~3 ms if kept for one call only, issue 8). An array
+    asked ``zero`` is zeroed at its first use in a call (``begin``); its users write the same
+    entries at every iteration of the call, so the others stay zero."""
+
+    def __init__(self):
+        self._flat: dict[str, np.ndarray] = {}
+        self._zeroed: set[str] = set()
+
+    def begin(self) -> "_Work":
+        """Start a BA call."""
+        self._zeroed.clear()
+        return self
+
+    def get(self, name: str, shape: tuple, zero: bool = False) -> np.ndarray:
+        n = math.prod(shape)
+        flat = self._flat.get(name)
+        if flat is None or len(flat) < n:
+            flat = self._flat[name] = np.empty(n + n // 4)   # room for a somewhat larger next window
+        a = flat[:n].reshape(shape)
+        if zero and name not in self._zeroed:
+            a.fill(0.0)
+            self._zeroed.add(name)
+        return a
+
+
+_THREAD = threading.local()
+
+
+def _work() -> _Work:
+    """This thread's work arrays (a BA call runs in one thread; two threads never share them)."""
+    w = getattr(_THREAD, "work", None)
+    if w is None:
+        w = _THREAD.work = _Work()
+    return w
+
+
+def _stable_order(keys: np.ndarray) -> np.ndarray:
+    """``np.argsort(keys, kind="stable")`` (a stable order is unique); keys below 2^16 as uint16,
+    which numpy sorts by radix (~6x faster than int64 on ~6 k pose indices)."""
+    if len(keys) and 0 <= keys.min() and keys.max() < 1 << 16:
+        keys = keys.astype(np.uint16)
+    return np.argsort(keys, kind="stable")
+
+
+def _take(a: np.ndarray, idx: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """``np.take(a, idx, axis=0)`` into ``out`` (``mode="clip"``: unbuffered; the indices are valid)."""
+    return np.take(a, idx, axis=0, out=out, mode="clip")
 
 
 class _Groups:
@@ -110,10 +232,11 @@ class _Groups:
     ``np.take``: the same values as fancy indexing, 2-4x faster on ~7 k small blocks.)"""
 
     def __init__(self, keys: np.ndarray, n: int):
-        self.order = np.argsort(keys, kind="stable")
+        self.order = _stable_order(keys)
         ks = keys[self.order]
         self.starts = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]]) if len(ks) else np.zeros(0, np.int64)
         self.keys = ks[self.starts]
+        self.ends = np.r_[self.starts[1:], len(ks)]
         self.n = n
         # local BA's edges come sorted by point (``_observation_edges``: by landmark id), and every
         # point has an edge: then the sums need neither the reordering gather nor the scatter
@@ -136,7 +259,7 @@ class _Groups:
 @dataclass
 class _Structure:
     """What stays fixed while LM iterates over one edge set: local edges, their points and poses
-    (where the blocks of the Schur complement's point-major matrices go), groupings."""
+    (where the blocks of the Schur complement's point-major matrices go), groupings, work arrays."""
 
     loc: np.ndarray          # indices of edges whose pose is optimised
     by_point: _Groups        # all edges by point
@@ -147,42 +270,62 @@ class _Structure:
     n_points: int
     n_local: int
     unique: bool             # no point seen twice by one local pose (then a scatter needs no sums)
+    work: _Work              # this call's work arrays
+    by_pose: _ByPose         # all edges by pose
+    loc_by_pose_index: np.ndarray   # where the local edges are in by_pose's order
+    flat: np.ndarray | None = None    # unique: where (edge, j, k) of a (m,6,3) block goes in point_major
 
     @staticmethod
-    def build(edges: StereoEdges, n_local: int, n_points: int) -> "_Structure":
+    def build(edges: StereoEdges, n_local: int, n_points: int, work: _Work) -> "_Structure":
         loc = np.flatnonzero(edges.pose < n_local)
         pts, kf = edges.point[loc], edges.pose[loc]
         # no (point, pose) key twice: one bincount over the P x L keys (np.unique sorted ~15 k keys per call)
         unique = len(loc) == 0 or int(np.bincount(pts * n_local + kf).max()) <= 1
-        return _Structure(loc, _Groups(edges.point, n_points), _Groups(kf, n_local), _Groups(pts, n_points),
-                          pts, kf, n_points, n_local, unique)
+        by_pose = _ByPose(edges)
+        st = _Structure(loc, _Groups(edges.point, n_points), _Groups(kf, n_local), _Groups(pts, n_points),
+                        pts, kf, n_points, n_local, unique, work, by_pose, by_pose.inverse[loc])
+        if unique:
+            # where element (edge, j, k) of an (m,6,3) block stack goes in the (n,3,L,6) point-major
+            # matrix: ((p * 3 + k) * L + l) * 6 + j = (p * 3L + l) * 6 + (k * 6L + j)
+            jk = np.arange(3)[None, :] * (6 * n_local) + np.arange(6)[:, None]
+            st.flat = (((pts * (3 * n_local) + kf) * 6)[:, None] + jk.reshape(1, -1)).reshape(-1)
+        return st
 
-    def point_major(self, blocks: np.ndarray) -> np.ndarray:
+    def chunked_shape(self) -> tuple[int, int, int]:
+        n = -(-self.n_points // POINTS_PER_CHUNK) * POINTS_PER_CHUNK
+        return n // POINTS_PER_CHUNK, 3 * POINTS_PER_CHUNK, 6 * self.n_local
+
+    def point_major(self, blocks: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """The (3 P, 6 L) matrix whose (point, pose) 3x6 block is the transpose of the local edge's
         (6,3) block, zero where the pose does not see the point (blocks of one point and pose
         summed), cut into chunks of ``POINTS_PER_CHUNK`` points (padded with zero rows):
         (chunks, 3 POINTS_PER_CHUNK, 6 L). Products of the chunks stay below OpenBLAS's
         threading threshold: one (6L x 3P) GEMM goes multi-threaded, and its spinning threads
-        cost 100+ ms of CPU per call on a loaded 2-core machine (1 ms single-threaded)."""
-        n = -(-self.n_points // POINTS_PER_CHUNK) * POINTS_PER_CHUNK
-        out = np.zeros((n, 3, self.n_local, 6))
-        pts, kf = self.loc_point, self.loc_pose
-        if self.unique:
-            out[pts, :, kf] = blocks.transpose(0, 2, 1)
-        else:
-            np.add.at(out, (pts, slice(None), kf), blocks.transpose(0, 2, 1))
-        return out.reshape(n // POINTS_PER_CHUNK, 3 * POINTS_PER_CHUNK, 6 * self.n_local)
+        cost 100+ ms of CPU per call on a loaded 2-core machine (1 ms single-threaded).
+        ``out``, unique structures only: a zeroed array of that shape (or one this structure's blocks
+        went into), written by one flat scatter (a fresh zeroed matrix and ``out[pts, :, kf] =
+        blocks.transpose(0, 2, 1)`` cost ~2x more per KITTI linearisation, issue 8)."""
+        if out is not None:
+            out.reshape(-1)[self.flat] = np.ascontiguousarray(blocks).reshape(-1)
+            return out
+        shape = self.chunked_shape()
+        out = np.zeros((shape[0] * POINTS_PER_CHUNK, 3, self.n_local, 6))
+        np.add.at(out, (self.loc_point, slice(None), self.loc_pose), blocks.transpose(0, 2, 1))
+        return out.reshape(shape)
 
 
-def _mv(M: np.ndarray, v: np.ndarray) -> np.ndarray:
+def _mv(M: np.ndarray, v: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """Batched matrix-vector product (matmul on stacks of small matrices beats einsum ~10x).
     ``np.matvec`` (numpy >= 2.2) is the same gufunc loop as ``(M @ v[..., None])[..., 0]``, bit for
     bit, without the trailing unit axis (issue 8: ~25 % less per call on KITTI's ~7 k edges)."""
-    return _MATVEC(M, v)
+    return _MATVEC(M, v, out=out)
 
 
-def _matvec_by_matmul(M: np.ndarray, v: np.ndarray) -> np.ndarray:
-    return (M @ v[..., None])[..., 0]
+def _matvec_by_matmul(M: np.ndarray, v: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    if out is None:
+        return (M @ v[..., None])[..., 0]
+    np.matmul(M, v[..., None], out=out[..., None])
+    return out
 
 
 _MATVEC = getattr(np, "matvec", _matvec_by_matmul)
@@ -215,21 +358,26 @@ _UPPER3 = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 GRAM_ROWS = 3072   # rows per GEMM in _pose_blocks: 6 x 6 x 3072 stays below OpenBLAS's threading threshold
 
 
-def _point_blocks(Jx: np.ndarray, w: np.ndarray, Wr: np.ndarray, groups: "_Groups") -> tuple[np.ndarray, np.ndarray]:
+def _point_blocks(Jx: np.ndarray, w: np.ndarray, Wr: np.ndarray, groups: "_Groups",
+                  work: _Work | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Per point: H_pp = sum_e w_e Jx_e^T Jx_e (3x3) and b_p = sum_e Jx_e^T (w_e r_e) (Triggs et al.
     2000, §6.1: the point blocks of the normal equations). Computed from the Jacobians' nine
     components as contiguous vectors over the edges: the six distinct entries of the symmetric
     block and the three of b_p are 45 vector operations, where one batched 3x3 matmul per edge
     (a BLAS call each) cost ~4x more on KITTI's ~5 k edges (issue 8). Same sums, rounded differently."""
-    J = np.ascontiguousarray(Jx.reshape(-1, 9).T)        # J[3k + i] = d(residual k)/d(X_i)
-    Jw = J * w
-    cols = np.empty((9, len(w)))
+    E, work = len(w), work or _Work()
+    J = work.get("J", (9, E))                             # J[3k + i] = d(residual k)/d(X_i)
+    np.copyto(J, Jx.reshape(-1, 9).T)
+    Jw = np.multiply(J, w, out=work.get("Jw", (9, E)))
+    cols = work.get("cols", (9, E))
     for c, (i, j) in enumerate(_UPPER3):
         cols[c] = Jw[i] * J[j] + Jw[3 + i] * J[3 + j] + Jw[6 + i] * J[6 + j]
     Wrt = np.ascontiguousarray(Wr.T)
     for i in range(3):
         cols[6 + i] = J[i] * Wrt[0] + J[3 + i] * Wrt[1] + J[6 + i] * Wrt[2]
-    sums = groups.sum(np.ascontiguousarray(cols.T))      # (P, 9)
+    colsT = work.get("colsT", (E, 9))
+    np.copyto(colsT, cols.T)
+    sums = groups.sum(colsT)                              # (P, 9)
     H = np.empty((len(sums), 3, 3))
     for c, (i, j) in enumerate(_UPPER3):
         H[:, i, j] = sums[:, c]
@@ -237,7 +385,8 @@ def _point_blocks(Jx: np.ndarray, w: np.ndarray, Wr: np.ndarray, groups: "_Group
     return H, np.ascontiguousarray(sums[:, 6:])
 
 
-def _pose_blocks(Jc: np.ndarray, wl: np.ndarray, Wr: np.ndarray, groups: "_Groups") -> tuple[np.ndarray, np.ndarray]:
+def _pose_blocks(Jc: np.ndarray, wl: np.ndarray, Wr: np.ndarray, groups: "_Groups",
+                 work: _Work | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Per local pose: H_cc = sum_e w_e Jc_e^T Jc_e (6x6) and b_c = sum_e Jc_e^T (w_e r_e), as one
     (6 x 3n)(3n x 6) GEMM and one GEMV over the pose's n edges stacked, in chunks of ``GRAM_ROWS``
     rows (a 6x3x6 matmul per edge and their sums cost ~1.5 ms per linearisation on KITTI; these
@@ -247,11 +396,16 @@ def _pose_blocks(Jc: np.ndarray, wl: np.ndarray, Wr: np.ndarray, groups: "_Group
     if not len(groups.starts):
         return H, b
     order = groups.order
-    A = np.take(Jc, order, axis=0).reshape(-1, 6)
-    Aw = np.take(Jc * wl, order, axis=0).reshape(-1, 6)
+    m, work = len(order), work or _Work()
+    A = _take(Jc, order, work.get("Jc_by_pose", Jc.shape))
+    # the weights on the gathered rows, as an (m,18) x (m,1) product: the same products as
+    # ``take(Jc * wl)``, whose (m,3,6) x (m,1,1) broadcast runs numpy's inner loop over 6 elements
+    # at a time (issue 8)
+    Aw = np.multiply(A.reshape(m, -1), np.take(wl.reshape(-1), order)[:, None],
+                     out=work.get("Jcw_by_pose", (m, 18))).reshape(-1, 6)
+    A = A.reshape(-1, 6)
     rw = np.take(Wr, order, axis=0).reshape(-1)
-    ends = np.r_[groups.starts[1:], len(order)]
-    for key, a, e in zip(groups.keys.tolist(), (3 * groups.starts).tolist(), (3 * ends).tolist()):
+    for key, a, e in zip(groups.keys.tolist(), (3 * groups.starts).tolist(), (3 * groups.ends).tolist()):
         for c in range(a, e, GRAM_ROWS):
             d = min(c + GRAM_ROWS, e)
             H[key] += A[c:d].T @ Aw[c:d]
@@ -267,53 +421,55 @@ class _Linearised:
         """``projected``: ``_project`` of this (T_cw, X) and its ``_robust_cost``, when LM has just
         computed them to accept the step."""
         if projected is None:
-            r, Pc, R, front = _project(T_cw, X, edges, calib)
+            r, Pc, R, front = _project(T_cw, X, edges, calib, st)
             projected = (r, Pc, R, front), _robust_cost(r, front, edges)
         (r, Pc, R, front), (self.cost, w) = projected
         self.projection = projected[0]
-        loc = st.loc
-        Jc, Jx = _jacobians(Pc, R, edges, calib, loc)                    # Jc: local edges only
+        loc, work = st.loc, st.work
+        Jc, Jx = _jacobians(Pc, R, calib, st)                              # Jc: local edges only
         Wr = r * w[:, None]
-        self.Hpp, self.bp = _point_blocks(Jx, w, Wr, st.by_point)
+        self.Hpp, self.bp = _point_blocks(Jx, w, Wr, st.by_point, work)
         JlT = Jc.transpose(0, 2, 1)
         wl = np.take(w, loc)[:, None, None]
-        self.Hcc, self.bc = _pose_blocks(Jc, wl, np.take(Wr, loc, axis=0), st.loc_by_pose)
-        self.Hcp = JlT @ (np.take(Jx, loc, axis=0) * wl)                  # (m,6,3)
+        self.Hcc, self.bc = _pose_blocks(Jc, wl, np.take(Wr, loc, axis=0), st.loc_by_pose, work)
+        m = len(loc)
+        Jxw = _take(Jx, loc, work.get("Jxw", (m, 3, 3)))
+        np.multiply(Jxw.reshape(m, 9), wl.reshape(m, 1), out=Jxw.reshape(m, 9))  # = take(Jx, loc) * wl
+        self.Hcp = np.matmul(JlT, Jxw, out=work.get("Hcp", (m, 6, 3)))     # (m,6,3)
         self.pts, self.kf = edges.point[loc], edges.pose[loc]
         self.n_local = n_local
         self.st = st
         self._W = None
 
-    def _point_major_pair(self, Hpp_inv: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``point_major`` of H_cp and of A = H_cp Hpp^-1. W does not depend on the damping, so it is
-        built once per linearisation (LM may solve several times at one point). Where no point is
-        seen twice by one pose, V's block (point p, pose l) is Hpp^-1[p] W's: one batched (3x3)(3x6L)
-        product per point instead of a second scatter into a zeroed matrix (Hpp^-1 is exactly
-        symmetric, so the products and their order are A's; identical results on recorded KITTI BAs)."""
+    def _point_major_pair(self, A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``point_major`` of H_cp (once per linearisation: LM may solve several times at one point)
+        and of A = H_cp Hpp^-1. Where no point is seen twice by one pose, V's block (p, l) is A_e^T:
+        Hpp^-1 is exactly symmetric (``_inv_sym3``), so A_e sums the products of Hpp^-1[p] H_pc,e in
+        the same order (one FMA chain in OpenBLAS), bit for bit without a (3x3)(3x6L) BLAS call per
+        point and a zero-padded copy of Hpp^-1."""
         st = self.st
-        if self._W is None:
-            self._W = st.point_major(self.Hcp)
-        W = self._W
         if not st.unique:
-            return W, st.point_major(A)
-        n_chunks, rows, cols = W.shape
-        Hinv = np.zeros((n_chunks * rows // 3, 3, 3))
-        Hinv[: len(Hpp_inv)] = Hpp_inv
-        V = np.matmul(Hinv, W.reshape(-1, 3, cols)).reshape(n_chunks, rows, cols)
-        return W, V
+            if self._W is None:
+                self._W = st.point_major(self.Hcp)
+            return self._W, st.point_major(A)
+        if self._W is None:
+            self._W = st.point_major(self.Hcp, st.work.get("W", st.chunked_shape(), zero=True))
+        return self._W, st.point_major(A, st.work.get("V", st.chunked_shape(), zero=True))
 
     def solve(self, lam: float) -> tuple[np.ndarray, np.ndarray]:
         """Damped step: (n_local,6) pose increments and (P,3) point increments."""
         L, st = self.n_local, self.st
         Hpp_inv = _inv_sym3(self.Hpp, lam)
-        A = self.Hcp @ np.take(Hpp_inv, self.pts, axis=0)              # (m,6,3) H_cp Hpp^-1
+        m = len(self.pts)
+        A = np.matmul(self.Hcp, _take(Hpp_inv, self.pts, st.work.get("Hinv_e", (m, 3, 3))),
+                      out=st.work.get("A", (m, 6, 3)))                     # (m,6,3) H_cp Hpp^-1
         # reduced camera system S = H_cc + lam I - sum over points of H_cp Hpp^-1 H_pc, the sum as
         # the (6L x 3P) (3P x 6L) product of the point-major matrices W = [H_pc] and
         # V = [Hpp^-1 H_pc] (zero where a pose does not see the point): a few dense products
         # instead of one 6x3x6 product per pair of edges on a point (KITTI: ~24 k pairs; the
         # reduction 14 -> ~2 ms per solve)
-        W, V = self._point_major_pair(Hpp_inv, A)
-        S = -np.matmul(W.transpose(0, 2, 1), V).sum(axis=0)
+        W, V = self._point_major_pair(A)
+        S = -np.matmul(W.transpose(0, 2, 1), V, out=st.work.get("S_chunks", (len(W),) + W.shape[2:] * 2)).sum(axis=0)
         S4 = S.reshape(L, 6, L, 6)
         idx = np.arange(L)
         S4[idx, :, idx, :] += self.Hcc + lam * np.eye(6)
@@ -361,9 +517,10 @@ def bundle_adjust_points(T_cw: np.ndarray, n_local: int, X: np.ndarray, edges: S
     if len(edges.pose) == 0:
         return T_cw, X, 0
     lam = LAMBDA_INITIAL
-    st = _Structure.build(edges, n_local, len(X))
+    st = _Structure.build(edges, n_local, len(X), _work().begin())
     lin = _Linearised(T_cw, X, edges, n_local, calib, st)
-    current = lin.projection      # the projection at (T_cw, X)
+    current = lin.projection      # the projection at (T_cw, X), in slot 0 of st.work
+    slot = 1                      # where a step's projection goes
     it = 0
     for it in range(1, max_iterations + 1):
         accepted = False
@@ -374,7 +531,7 @@ def bundle_adjust_points(T_cw: np.ndarray, n_local: int, X: np.ndarray, edges: S
                 lam *= LAMBDA_FACTOR
                 continue
             T_try, X_try = _apply(T_cw, X, dc, dp)
-            proj = _project(T_try, X_try, edges, calib)
+            proj = _project(T_try, X_try, edges, calib, st, slot)
             robust = _robust_cost(proj[0], proj[3], edges)
             if robust[0] < lin.cost:
                 accepted = True
@@ -384,7 +541,7 @@ def bundle_adjust_points(T_cw: np.ndarray, n_local: int, X: np.ndarray, edges: S
             break
         old = lin.cost
         T_cw, X = T_try, X_try
-        current = proj
+        current, slot = proj, 1 - slot
         lam = max(lam / LAMBDA_FACTOR, 1e-12)
         # converged or out of iterations: stop before linearising at the new point (its Jacobians
         # would be used by no further step)
@@ -392,5 +549,5 @@ def bundle_adjust_points(T_cw: np.ndarray, n_local: int, X: np.ndarray, edges: S
             break
         lin = _Linearised(T_cw, X, edges, n_local, calib, st, projected=(proj, robust))
     if final_projection is not None:
-        final_projection.append(current[:2])
+        final_projection.append(tuple(a.copy() for a in current[:2]))   # the next call reuses the arrays
     return T_cw, X, it
