@@ -200,34 +200,33 @@ def test_the_store_follows_every_kind_of_change_of_the_dicts():
     assert type(copy.copy(store[5].obs)) is dict and pickle.loads(pickle.dumps(store[5].obs)) == {9: 9, 2: 2}
 
 
-def test_sparse_ids_turn_the_store_off_and_the_readers_chain_the_dicts():
+def _store_turned_off_by(lid_of) -> None:
+    """A still run's mapper; adding landmark ``lid_of(mapper)`` turns its observation store off for
+    good, and covisibility and BA's edges read from the dicts are what the store gave."""
     mapper, _ = _still_run(MappingParams(), n_kf=6, seed=2)
     rec = mapper.keyframes[5]
     before = mapper._covisible(rec)
     edges = mapper._observation_edges([5, 4], {5, 4, 0})
     assert mapper.landmarks.observations is not None
-    far = 10 ** 9
-    mapper.landmarks[far] = Landmark(far, np.zeros(3), np.zeros(32, np.uint8), {0: 0})
+    lid = lid_of(mapper)
+    mapper.landmarks[lid] = Landmark(lid, np.zeros(3), np.zeros(32, np.uint8), {0: 0})
     assert mapper.landmarks.observations is None                      # off for good
-    del mapper.landmarks[far]
+    del mapper.landmarks[lid]
     assert mapper._covisible(rec) == before
     for got, want in zip(mapper._observation_edges([5, 4], {5, 4, 0}), edges):
         np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
+
+
+def test_sparse_ids_turn_the_store_off_and_the_readers_chain_the_dicts():
+    _store_turned_off_by(lambda mapper: 10 ** 9)
 
 
 def test_the_store_turns_off_past_its_memory_budget_and_the_readers_agree(monkeypatch):
     import canopy.backend.map_store as map_store
-    mapper, _ = _still_run(MappingParams(), n_kf=6, seed=2)
-    rec = mapper.keyframes[5]
-    before = mapper._covisible(rec)
-    edges = mapper._observation_edges([5, 4], {5, 4, 0})
-    st = mapper.landmarks.observations
-    assert st is not None
-    monkeypatch.setattr(map_store, "OBSERVATION_STORE_MAX_BYTES", st.kf.nbytes)   # the next landmarks pass it
-    nxt = max(mapper.landmarks) + 1
-    mapper.landmarks[nxt] = Landmark(nxt, np.zeros(3), np.zeros(32, np.uint8), {0: 0})
-    assert mapper.landmarks.observations is None                      # off for good
-    del mapper.landmarks[nxt]
-    assert mapper._covisible(rec) == before
-    for got, want in zip(mapper._observation_edges([5, 4], {5, 4, 0}), edges):
-        np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
+
+    def next_id_past_the_budget(mapper):
+        st = mapper.landmarks.observations
+        monkeypatch.setattr(map_store, "OBSERVATION_STORE_MAX_BYTES", st.kf.nbytes)   # the next landmark passes it
+        return max(mapper.landmarks) + 1
+
+    _store_turned_off_by(next_id_past_the_budget)
