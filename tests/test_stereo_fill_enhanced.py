@@ -18,7 +18,7 @@ import pytest
 
 from canopy.config import load_run_config
 from canopy.degrade import NOISE_LEVELS, DegradeParams, degrade_image, depth_from_stereo, disparity_sgbm, ray_length
-from canopy.enhance import EnhanceParams
+from canopy.enhance import tracking_fast_arguments
 from canopy.enhance.pair import PairEnhancer
 from canopy.frontend.noisy_features import tracking_extractor
 from canopy.frontend.params import TrackingParams
@@ -28,7 +28,9 @@ from canopy.sources import open_source
 from shared.errors import ConfigError
 
 KITTI = Path(__file__).resolve().parents[1] / "data" / "kitti06_snippet"
-GATE = dict(stereo_fill=True, stereo_fill_enhanced_min_sigma=2.0, stereo_fill_enhanced_max_texture=2.0)
+# KITTI's enhanced pair measures robust 0.88 (noisy sensor) against 0.23 (no sensor noise); the generated
+# orchards' own fine texture lifts both (configs/synthetic.yaml's value is for those)
+GATE = dict(stereo_fill=True, stereo_fill_enhanced_min_sigma=0.5, stereo_fill_enhanced_max_texture=2.0)
 
 
 def _params(**kw):
@@ -50,10 +52,13 @@ def _enhanced_pair(noisy: bool, frame_index: int = 20):
     return src, f, le, re, info
 
 
-def _matches(params, left_img, right_img, calib, fast: int):
-    # an enhanced frame: the tracker passes a fallback threshold, so the extractor measures no robust sigma
-    fl = tracking_extractor(params, responses=False).extract(left_img, fast, fast // 2, 0)
-    fr = tracking_extractor(params, responses=False).extract(right_img, fast, fast // 2, 0)
+def _matches(params, left_img, right_img, calib):
+    # an enhanced frame: the tracking actor's FAST arguments (AFE Eq. 18 / 19), so the extractor
+    # measures no robust sigma
+    fast = tracking_fast_arguments(left_img, "afe>dn", load_run_config("synthetic").enhancement, params.n_features)
+    args = (fast["fast_threshold"], fast["fast_fallback"], fast["fast_min_keypoints"])
+    fl = tracking_extractor(params, responses=False).extract(left_img, *args)
+    fr = tracking_extractor(params, responses=False).extract(right_img, *args)
     assert fl.robust_noise_sigma is None
     return fl, match_stereo(fl, fr, left_img, right_img, calib, params)
 
@@ -62,7 +67,8 @@ def test_off_by_default_and_refused_when_negative():
     assert TrackingParams().stereo_fill_enhanced_min_sigma == 0.0
     assert load_run_config("kitti").tracking.stereo_fill_enhanced_min_sigma == 0.0
     assert load_run_config("euroc").tracking.stereo_fill_enhanced_min_sigma == 0.0
-    for bad in ({"stereo_fill_enhanced_min_sigma": -1.0}, {"stereo_fill_enhanced_max_texture": -0.5}):
+    for bad in ({"stereo_fill_enhanced_min_sigma": -1.0}, {"stereo_fill_enhanced_max_sigma": -1.0},
+                {"stereo_fill_enhanced_max_texture": -0.5}):
         with pytest.raises(ConfigError, match=next(iter(bad))):
             replace(TrackingParams(), **bad).validate()
 
@@ -75,6 +81,11 @@ def test_gate_opens_on_the_noisy_enhanced_pair_only():
     assert enhanced_fill_active(noisy, p)
     assert not enhanced_fill_active(quiet, p)
     assert not enhanced_fill_active(None, p)   # no image: no fill-in
+    # the upper bound (the clean haze-row's dehazed frames measure 5.4-5.7)
+    assert not enhanced_fill_active(noisy, replace(p, stereo_fill_enhanced_max_sigma=0.6))
+    assert enhanced_fill_active(noisy, replace(p, stereo_fill_enhanced_max_sigma=4.0))
+    # the texture test: the same image with a 0 grey-level texture allowance is refused
+    assert not enhanced_fill_active(noisy, replace(p, stereo_fill_enhanced_max_texture=1e-6))
 
 
 def test_fill_on_the_enhanced_noisy_pair_adds_good_matches():
@@ -82,10 +93,10 @@ def test_fill_on_the_enhanced_noisy_pair_adds_good_matches():
     calib = src.calibration
     off = _params(stereo_fill=False)
     on = _params(**GATE)
-    fl, base = _matches(off, left, right, calib, 20)
+    fl, base = _matches(off, left, right, calib)
     assert fill_active(fl, on, left)
     assert not fill_active(fl, _params(stereo_fill=True, stereo_fill_min_sigma=5.5), left)  # the old rule: shut
-    fl2, filled = _matches(on, left, right, calib, 20)
+    fl2, filled = _matches(on, left, right, calib)
     np.testing.assert_array_equal(fl2.uv, fl.uv)
     kept = base.valid
     np.testing.assert_array_equal(filled.u_right[kept], base.u_right[kept])   # descriptor matches untouched
@@ -102,6 +113,6 @@ def test_fill_on_the_enhanced_noisy_pair_adds_good_matches():
     # the added disparities are about as good as the descriptor matcher's against the clean SGBM
     assert np.median(err(added)) <= 1.25 * np.median(err(base.valid)) + 0.1
     # with the rule off the output is the descriptor matcher's, bit for bit
-    _, same = _matches(_params(stereo_fill=True, stereo_fill_min_sigma=5.5), left, right, calib, 20)
+    _, same = _matches(_params(stereo_fill=True, stereo_fill_min_sigma=5.5), left, right, calib)
     np.testing.assert_array_equal(same.u_right, base.u_right)
     np.testing.assert_array_equal(same.depth, base.depth)
