@@ -73,6 +73,13 @@ def test_off_by_default_and_refused_when_negative():
             replace(TrackingParams(), **bad).validate()
 
 
+def test_synthetic_config_has_the_rule():
+    t = load_run_config("synthetic").tracking
+    assert (t.stereo_fill, t.stereo_fill_min_sigma) == (True, 5.5)           # the raw-frame rule, unchanged
+    assert (t.stereo_fill_enhanced_min_sigma, t.stereo_fill_enhanced_max_sigma,
+            t.stereo_fill_enhanced_max_texture) == (2.0, 4.0, 1.5)
+
+
 def test_gate_opens_on_the_noisy_enhanced_pair_only():
     _, _, noisy, _, info_n = _enhanced_pair(True)
     _, _, quiet, _, info_q = _enhanced_pair(False)
