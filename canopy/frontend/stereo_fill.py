@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from canopy.enhance.noise import estimate_noise
 from canopy.frontend.features import Features
 from canopy.frontend.noisy_features import refinement_pair
 from canopy.frontend.params import TrackingParams
@@ -46,6 +47,8 @@ def fill_active(left: Features, params: TrackingParams, left_img: np.ndarray | N
         return False
     sig = left.robust_noise_sigma
     if sig is None:
+        if params.stereo_fill_enhanced_min_sigma > 0:
+            return enhanced_fill_active(left_img, params, noise_sigma)
         return params.stereo_fill_min_sigma <= 0 and params.stereo_fill_max_sigma <= 0 and params.stereo_fill_max_texture <= 0
     top = params.stereo_fill_max_sigma
     if sig < params.stereo_fill_min_sigma or (top > 0 and sig >= top):
@@ -57,6 +60,33 @@ def fill_active(left: Features, params: TrackingParams, left_img: np.ndarray | N
             raise ValueError("fill_active: stereo_fill_max_texture needs noise_sigma or left_img")
         noise_sigma = image_noise_sigma(left_img)
     return float(noise_sigma) - sig < params.stereo_fill_max_texture
+
+
+def enhanced_fill_active(left_img: np.ndarray | None, params: TrackingParams,
+                         noise_sigma: float | None = None) -> bool:
+    """The fill-in gate of a frame the enhancement changed (no ``Features.robust_noise_sigma``):
+    the enhanced left image's robust sigma (``estimate_noise``, rows_fraction 0.5) in
+    [``stereo_fill_enhanced_min_sigma``, ``stereo_fill_enhanced_max_sigma``) (max 0: unbounded) and, with ``stereo_fill_enhanced_max_texture`` > 0, its texture
+    excess (``noise_sigma`` - robust sigma; ``noise_sigma`` the tracker's mean Immerkaer figure of the
+    same image, measured here when None) below it. False without an image (the appearance-first
+    stage of ``appearance_first_matches`` has none).
+
+    Why the enhanced image: the tracker sees only the enhanced pair. After AFE + the denoiser the
+    residual noise still tells the noisy sensor from a dark clean scene: sampled every 15th frame of the
+    first 300, the day-loop g0.15-b0.06-high cell measures robust 2.20-2.37 (texture excess 0.7-0.9),
+    the clean dark-rows preset 1.09-1.83, the clean dusk-loop's enhanced frames up to 2.89 but those above
+    1.82 textured (excess >= 2), the clean haze-row's dehazed frames 5.4-5.7 (hence the upper bound);
+    docs/notes/s19-dimfill.md."""
+    if left_img is None:
+        return False
+    robust = estimate_noise(left_img, rows_fraction=0.5)
+    top = params.stereo_fill_enhanced_max_sigma
+    if robust < params.stereo_fill_enhanced_min_sigma or (top > 0 and robust >= top):
+        return False
+    if params.stereo_fill_enhanced_max_texture <= 0:
+        return True
+    mean = image_noise_sigma(left_img) if noise_sigma is None else float(noise_sigma)
+    return mean - robust < params.stereo_fill_enhanced_max_texture
 
 
 def fill_unmatched_by_flow(matches: StereoMatches, left: Features, left_img: np.ndarray, right_img: np.ndarray,
