@@ -73,11 +73,10 @@ def test_off_by_default_and_refused_when_negative():
             replace(TrackingParams(), **bad).validate()
 
 
-def test_synthetic_config_has_the_rule():
+def test_synthetic_config_keeps_the_raw_rule_and_leaves_the_enhanced_gate_off():
     t = load_run_config("synthetic").tracking
-    assert (t.stereo_fill, t.stereo_fill_min_sigma) == (True, 5.5)           # the raw-frame rule, unchanged
-    assert (t.stereo_fill_enhanced_min_sigma, t.stereo_fill_enhanced_max_sigma,
-            t.stereo_fill_enhanced_max_texture) == (2.0, 4.0, 1.5)
+    assert (t.stereo_fill, t.stereo_fill_min_sigma) == (True, 5.5)           # the raw-frame rule
+    assert t.stereo_fill_enhanced_min_sigma == 0.0                           # off: see configs/synthetic.yaml
 
 
 def test_gate_opens_on_the_noisy_enhanced_pair_only():
