@@ -62,8 +62,11 @@ class RuntimeParams:
     # many MB stay in the process instead of going back to the kernel (M_MMAP_THRESHOLD, and
     # M_TRIM_THRESHOLD at 4x), so the per-frame temporaries of numpy/OpenCV do not page-fault in again
     # every frame (~2.5 us a fault, hundreds a frame on EuRoC: docs/notes/s19-mapsearch.md). 0: glibc's
-    # own dynamic thresholds.
-    malloc_keep_mb: int = 0
+    # own dynamic thresholds. 32 (s19, quiet interleaved A/B, 4 + 4 bench_peers runs): tracking-thread CPU
+    # per KITTI frame 28.3 -> 25.3 ms (1.30 -> 1.21x ORB-SLAM3's in the same runs), EuRoC 15.9 -> 15.1; run-queue
+    # wait 10.7 -> 9.9 / 4.8 -> 4.1 ms; minor faults of a launch 213 k -> 117 k; trajectories byte-equal.
+    # Costs at most ~4 x 32 MB of freed heap kept per actor process.
+    malloc_keep_mb: int = 32
     seed: int = 0
     sensor: str = "stereo"           # stereo | mono (the left image only; canopy.mono)
 
