@@ -84,6 +84,25 @@ def test_off_or_outside_the_rule_is_the_descriptor_matcher(case):
     np.testing.assert_array_equal(same.depth, base.depth)
 
 
+def filled_against_sgbm(fl, base, filled, clean):
+    """The fill-in's matches ``filled`` against the descriptor matcher's ``base`` on the same keypoints
+    ``fl``: the descriptor matches must be untouched; returns the added matches' mask and the
+    |disparity - the clean pair's SGBM disparity| of the added and of the descriptor matches, and that
+    SGBM disparity at every keypoint (0: none)."""
+    kept = base.valid
+    np.testing.assert_array_equal(filled.u_right[kept], base.u_right[kept])   # descriptor matches untouched
+    added = filled.valid & ~kept
+    ref = disparity_sgbm(clean.left, clean.right).astype(np.float64)
+    h, w = ref.shape
+    uv = fl.uv
+    d_ref = ref[np.clip(np.rint(uv[:, 1]).astype(int), 0, h - 1), np.clip(np.rint(uv[:, 0]).astype(int), 0, w - 1)]
+
+    def err(m):
+        s = m & (d_ref > 0)
+        return np.abs((uv[s, 0] - filled.u_right[s]) - d_ref[s])
+    return added, err(added), err(kept), d_ref
+
+
 def test_fill_recovers_far_stereo_points_of_a_hazy_pair():
     src, clean, left, right = _hazy_pair(20)
     calib = src.calibration
@@ -94,20 +113,10 @@ def test_fill_recovers_far_stereo_points_of_a_hazy_pair():
     assert fill_active(fl, on, left)                     # and haze flattened the texture
     fl2, filled = _matches(on, left, right, calib)
     np.testing.assert_array_equal(fl2.uv, fl.uv)         # same keypoints
-    kept = base.valid
-    np.testing.assert_array_equal(filled.u_right[kept], base.u_right[kept])   # descriptor matches untouched
-    added = filled.valid & ~base.valid
+    added, e_add, e_base, d_ref = filled_against_sgbm(fl, base, filled, clean)
     assert added.sum() >= 0.3 * base.valid.sum()
-    ref = disparity_sgbm(clean.left, clean.right).astype(np.float64)
-    h, w = ref.shape
-    uv = fl.uv
-    d_ref = ref[np.clip(np.rint(uv[:, 1]).astype(int), 0, h - 1), np.clip(np.rint(uv[:, 0]).astype(int), 0, w - 1)]
     # the added disparities are as good as the descriptor matcher's, against the clean pair's SGBM
     # (itself ~0.5 px from the truth on KITTI: the figures compare, they are not absolute errors)
-    def err(m):
-        s = m & (d_ref > 0)
-        return np.abs((uv[s, 0] - filled.u_right[s]) - d_ref[s])
-    e_add, e_base = err(added), err(base.valid)
     assert np.median(e_add) <= 1.1 * np.median(e_base)
     assert np.mean(e_add > 1.0) <= np.mean(e_base > 1.0) + 0.05
     # far points (clean SGBM depth > 20 m): the fill-in matches more of them than the descriptors did
