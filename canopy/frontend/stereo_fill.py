@@ -50,16 +50,23 @@ def fill_active(left: Features, params: TrackingParams, left_img: np.ndarray | N
         if params.stereo_fill_enhanced_min_sigma > 0:
             return enhanced_fill_active(left_img, params, noise_sigma)
         return params.stereo_fill_min_sigma <= 0 and params.stereo_fill_max_sigma <= 0 and params.stereo_fill_max_texture <= 0
-    top = params.stereo_fill_max_sigma
-    if sig < params.stereo_fill_min_sigma or (top > 0 and sig >= top):
+    if params.stereo_fill_max_texture > 0 and noise_sigma is None and left_img is None:
+        raise ValueError("fill_active: stereo_fill_max_texture needs noise_sigma or left_img")
+    return _in_band_and_flat(sig, params.stereo_fill_min_sigma, params.stereo_fill_max_sigma,
+                             params.stereo_fill_max_texture, left_img, noise_sigma)
+
+
+def _in_band_and_flat(robust: float, low: float, top: float, max_texture: float,
+                      img: np.ndarray | None, noise_sigma: float | None) -> bool:
+    """Both gates' test: the robust sigma in [low, top) (top 0: unbounded) and, with max_texture > 0,
+    the texture excess (the mean |Laplacian| sigma ``noise_sigma``, measured on ``img`` when None,
+    minus the robust one) below max_texture."""
+    if robust < low or (top > 0 and robust >= top):
         return False
-    if params.stereo_fill_max_texture <= 0:
+    if max_texture <= 0:
         return True
-    if noise_sigma is None:
-        if left_img is None:
-            raise ValueError("fill_active: stereo_fill_max_texture needs noise_sigma or left_img")
-        noise_sigma = image_noise_sigma(left_img)
-    return float(noise_sigma) - sig < params.stereo_fill_max_texture
+    mean = image_noise_sigma(img) if noise_sigma is None else float(noise_sigma)
+    return mean - robust < max_texture
 
 
 def enhanced_fill_active(left_img: np.ndarray | None, params: TrackingParams,
@@ -79,14 +86,9 @@ def enhanced_fill_active(left_img: np.ndarray | None, params: TrackingParams,
     docs/notes/s19-dimfill.md."""
     if left_img is None:
         return False
-    robust = estimate_noise(left_img, rows_fraction=0.5)
-    top = params.stereo_fill_enhanced_max_sigma
-    if robust < params.stereo_fill_enhanced_min_sigma or (top > 0 and robust >= top):
-        return False
-    if params.stereo_fill_enhanced_max_texture <= 0:
-        return True
-    mean = image_noise_sigma(left_img) if noise_sigma is None else float(noise_sigma)
-    return mean - robust < params.stereo_fill_enhanced_max_texture
+    return _in_band_and_flat(estimate_noise(left_img, rows_fraction=0.5), params.stereo_fill_enhanced_min_sigma,
+                             params.stereo_fill_enhanced_max_sigma, params.stereo_fill_enhanced_max_texture,
+                             left_img, noise_sigma)
 
 
 def fill_unmatched_by_flow(matches: StereoMatches, left: Features, left_img: np.ndarray, right_img: np.ndarray,
