@@ -97,8 +97,11 @@ class RunOutcome:
     exit_codes: dict = field(default_factory=dict)
 
 
-class _Terminate(Exception):
-    pass
+class _Terminate(BaseException):
+    """SIGTERM of the launcher, raised wherever the main thread is. A BaseException like
+    KeyboardInterrupt, so that no ``except Exception`` on the way (the inspection stream's
+    preview fallback, a callback's guard) can swallow it and let the run go on to a normal end:
+    CI once saw a SIGTERM during a published event end with exit code 0."""
 
 
 def _signal_name(code: int | None) -> str:

@@ -7,6 +7,7 @@ import time
 
 import cv2
 import numpy as np
+import pytest
 import zmq
 
 from actors.inspection import InspectionServer, inspection_request
@@ -272,3 +273,27 @@ def test_control_requests_say_why_they_cannot_be_done(tmp_path):
     assert f"at most {MAX_SAVED_MAPS}" in sup._answer("save_map")[1]
     no_dir = Supervisor([], [], source="source", on_event=lambda m: None)
     assert "not available" in no_dir._answer("save_map")[1]
+
+
+def test_a_sigterm_during_a_published_event_is_not_swallowed(tmp_path):
+    """The launcher's SIGTERM raises wherever the main thread is, also inside the preview
+    fallback that keeps a failing delta or JPEG from ending the run. It must still end the run
+    (CI once saw a SIGTERM there end with exit code 0), while an ordinary failure is absorbed."""
+    from actors.supervisor import _Terminate
+
+    zctx = zmq.Context()
+    srv = InspectionServer(zctx, f"ipc://{tmp_path}/insp")
+    try:
+        def broken(msg, payload):
+            raise ValueError("a delta that cannot be built")
+        srv.stream.events = broken
+        srv.publish_event(_pose(1), encode(_pose(1)))  # absorbed: the event goes out as is
+
+        def terminated(msg, payload):
+            raise _Terminate()
+        srv.stream.events = terminated
+        with pytest.raises(_Terminate):
+            srv.publish_event(_pose(2), encode(_pose(2)))
+    finally:
+        srv.close()
+        zctx.term()
