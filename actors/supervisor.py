@@ -21,7 +21,9 @@ import os
 import shutil
 import signal
 import tempfile
+import threading
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
@@ -102,6 +104,32 @@ class _Terminate(BaseException):
     KeyboardInterrupt, so that no ``except Exception`` on the way (the inspection stream's
     preview fallback, a callback's guard) can swallow it and let the run go on to a normal end:
     CI once saw a SIGTERM during a published event end with exit code 0."""
+
+
+@dataclass
+class HeldSignals:
+    received: list = field(default_factory=list)
+
+
+@contextmanager
+def hold_signals(*signums: int):
+    """Defer these signals while the block runs (a run's cleanup and the writing of its
+    outputs): a SIGTERM or Ctrl-C that lands there is noted in ``received`` instead of killing
+    the launcher half-way through ``trajectory.tum`` or leaving the actors orphaned; the caller
+    then reports the run as interrupted. Off the main thread (where Python cannot install
+    handlers) nothing is held."""
+    held = HeldSignals()
+    if threading.current_thread() is not threading.main_thread():
+        yield held
+        return
+    old = {s: signal.getsignal(s) for s in signums}
+    for s in signums:
+        signal.signal(s, lambda signum, frame: held.received.append(signum))
+    try:
+        yield held
+    finally:
+        for s, handler in old.items():
+            signal.signal(s, handler)
 
 
 def _signal_name(code: int | None) -> str:
@@ -205,11 +233,13 @@ class Supervisor:
         except (KeyboardInterrupt, _Terminate):
             outcome = RunOutcome(ok=False, reason="interrupted by the user", interrupted=True)
         finally:
-            signal.signal(signal.SIGTERM, old_term)
-            try:
+            try:  # SIGTERM or Ctrl-C while the actors stop: stop them now instead of waiting
                 self._stop_all(controls, outcome.reason or "run finished")
             except (KeyboardInterrupt, _Terminate):
                 self._kill_all()
+            # From here on a SIGTERM goes where the caller put it (app.run_slam holds it until
+            # the outputs are written); raising it in the cleanup below would leak the rings.
+            signal.signal(signal.SIGTERM, old_term)
             outcome.exit_codes = {n: p.exitcode for n, p in self.procs.items()}
             self._drain(events, inspect)
             if inspect is not None:

@@ -8,13 +8,14 @@ was computed to the output folder.
 from __future__ import annotations
 
 import os
+import signal
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from actors.collector import RunCollector, format_summary
 from actors.runtime import ActorSpec
-from actors.supervisor import RingSpec, RunOutcome, Supervisor
+from actors.supervisor import RingSpec, RunOutcome, Supervisor, hold_signals
 from canopy.config import REPO_ROOT, load_run_config, with_overrides
 from canopy.sources import open_source
 
@@ -195,11 +196,27 @@ def run_slam(dataset: str, path: str | None = None, config: str | None = None, o
         ready_timeout_s=cfg.runtime.ready_timeout_s, grace_s=cfg.runtime.grace_s,
         inspect_endpoint=inspect, run_dir=run_dir, inspect_keys=server_keys, run_start=run_start,
         queries=queries, inspect_frames_ring=rings["enhanced"], save_map_dir=str(out_dir))
-    try:
-        outcome = supervisor.run()
-    finally:
-        if live is not None:
-            live.close()
+    # SIGTERM is held from the end of the supervisor's own handling (it raises inside the run)
+    # until every output is written, Ctrl-C from the end of the run: a late signal must not cost
+    # the user what was computed. Either one still ends the launcher with the run reported
+    # interrupted.
+    with hold_signals(signal.SIGTERM) as held_term:
+        try:
+            outcome = supervisor.run()
+        finally:
+            if live is not None:
+                live.close()
+        with hold_signals(signal.SIGINT) as held_int:
+            result = _write_run_outputs(outcome, collector, cfg, calib, source, out_dir, run_id, dataset, preset,
+                                        path, record_path, save_map_path)
+    if (held_term.received or held_int.received) and outcome.ok:
+        outcome.ok, outcome.interrupted = False, True
+        outcome.reason = "interrupted by the user (after the last frame: the results are complete)"
+    return result
+
+
+def _write_run_outputs(outcome, collector, cfg, calib, source, out_dir, run_id, dataset, preset, path,
+                       record_path, save_map_path) -> RunResult:
     collector.finish_progress()
     repaired = None
     if record_path and Path(record_path).is_file():
