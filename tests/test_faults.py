@@ -39,11 +39,11 @@ def _launcher_pid(out: Path) -> int:
     return json.loads((out / "metrics.json").read_text())["run"]["launcher_pid"]
 
 
-def _start(tmp_path, *args):
+def _start(tmp_path, *args, env=None):
     endpoint = f"ipc://{tmp_path}/inspect"
     proc = subprocess.Popen([sys.executable, str(ROOT / "launch.py"), "--out", str(tmp_path / "run"),
                              "--inspect", endpoint, "--quiet", *args],
-                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     return proc, endpoint
 
 
@@ -80,7 +80,10 @@ def _wait_gone(pids, timeout_s=END_WITHIN_S):
 
 
 def test_sigkill_of_the_launcher_leaves_a_parseable_trajectory_and_nothing_behind(tmp_path):
-    proc, endpoint = _start(tmp_path, "--dataset", "euroc")
+    # A private temp folder (short: ipc:// paths must fit a sockaddr_un): any other launcher on
+    # the machine sweeps the shared one at its start-up and would remove the folder checked here.
+    run_tmp = tempfile.mkdtemp(prefix="cf", dir="/tmp")
+    proc, endpoint = _start(tmp_path, "--dataset", "euroc", env={**os.environ, "TMPDIR": run_tmp})
     try:
         pids = _watch_until(endpoint, 20)
         proc.kill()
@@ -97,12 +100,13 @@ def test_sigkill_of_the_launcher_leaves_a_parseable_trajectory_and_nothing_behin
     # the kill may land between a frame's trajectory line and its frames.csv row
     assert rows[0].startswith("index,timestamp,status,reason") and len(rows) - 1 >= len(traj) - 1
     # The dead launcher's socket folder is still there; the next run's start-up sweeps it.
-    stale = [d for d in Path(tempfile.gettempdir()).glob(f"{RUN_DIR_PREFIX}*")
+    stale = [d for d in Path(run_tmp).glob(f"{RUN_DIR_PREFIX}*")
              if (d / OWNER_FILE).is_file() and (d / OWNER_FILE).read_text().split()[0] == str(proc.pid)]
     assert stale, "expected the killed launcher's socket folder"
-    sweep_stale_runs()
+    sweep_stale_runs(run_tmp)
     assert not any(d.exists() for d in stale)
     assert not _shm_segments(proc.pid), "shared memory leaked"
+    shutil.rmtree(run_tmp, ignore_errors=True)
 
 
 def test_frozen_local_mapping_is_blamed_not_tracking(tmp_path):
