@@ -127,7 +127,8 @@ def run_peer(orb, kind: str, path: Path, preprocess, max_frames) -> dict:
     res = orb.run_stereo(str(path), kind, preprocess=preprocess, max_frames=max_frames)
     gt = open_source(kind, path, max_frames=max_frames).ground_truth
     m = evaluate_trajectory(res.trajectory, gt) if res.trajectory is not None and len(res.trajectory) else {}
-    return {"tracked_pct": 100.0 * res.tracked / max(res.total, 1), "ate_rmse_m": (m.get("ate") or {}).get("rmse")}
+    return {"tracked_pct": 100.0 * res.tracked / max(res.total, 1), "ate_rmse_m": (m.get("ate") or {}).get("rmse"),
+            "frozen": res.frozen}
 
 
 def median_run(runs: list[dict]) -> dict:

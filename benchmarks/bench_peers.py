@@ -218,7 +218,7 @@ def run_peer(seq: dict, enhance: str | None, vocabulary: Path, pace: bool) -> di
                 "track_ms_p95": float(np.percentile(ms, 95)) if len(ms) else None,
                 "fps": float(len(ms) / (ms.sum() / 1e3)) if ms.sum() > 0 else None,
                 "cpu_percent": 100.0 * r.cpu_s / r.wall_s if r.wall_s else None,
-                "frames": r.total, "resets": r.resets, "loops": r.loops, "wall_s": r.wall_s,
+                "frames": r.total, "resets": r.resets, "frozen": r.frozen, "loops": r.loops, "wall_s": r.wall_s,
                 "final_ate_rmse_m": final.get("ate_rmse_m"), "error": r.error,
                 "final_trajectory_error": r.meta.get("final_trajectory_error"),
                 "outcome": "error" if r.error else "completed"})

@@ -1,6 +1,9 @@
 """Issue 9's grid criteria as the degradation benchmark scores them (benchmarks/bench_degrade_grid.py)."""
 import importlib.util
 from pathlib import Path
+
+import cv2
+import numpy as np
 import pytest
 
 _spec = importlib.util.spec_from_file_location(
@@ -109,3 +112,26 @@ def test_median_run_ranks_by_tracked_then_ate_and_keeps_every_run():
     assert grid.median_run([{"tracked_pct": 41.0, "ate_rmse_m": None}])["tracked_pct"] == 41.0
     with pytest.raises(ValueError):
         grid.median_run([])
+
+
+def test_a_peer_pose_that_never_leaves_the_origin_is_not_tracking():
+    """ORB-SLAM3 says OK on 26 of 51 dark hazy KITTI frames while every pose is the identity: the
+    frames after the first that repeat the first pose exactly are not estimates. A hovering camera's
+    real estimates (EuRoC) differ from each other by far more than the tolerance, and a pose that
+    comes back near the start later in a loop is kept."""
+    from benchmarks.peers.orbslam3 import frozen_frames
+
+    def se3_exp(xi):  # rotation vector, translation: a pose near enough for this test
+        T = np.eye(4)
+        T[:3, :3] = cv2.Rodrigues(np.asarray(xi[:3], np.float64))[0]
+        T[:3, 3] = xi[3:]
+        return T
+
+    frozen = np.repeat(np.eye(4)[None], 26, axis=0)
+    assert frozen_frames(frozen).tolist() == [False] + [True] * 25
+    rng = np.random.default_rng(3)
+    hover = np.stack([se3_exp(rng.normal(0, 1e-4, 6)) for _ in range(30)])  # 0.1 mm / 6 mdeg of estimate noise
+    assert not frozen_frames(hover).any()
+    moving = np.stack([se3_exp(np.r_[0, 0, 0, 0, 0, 0.8 * i]) for i in range(10)])
+    moving = np.concatenate([moving, moving[:1] @ se3_exp(np.r_[0, 0, 0, 0, 0, 1e-6])[None]])
+    assert not frozen_frames(moving).any() and frozen_frames(np.zeros((0, 4, 4))).shape == (0,)

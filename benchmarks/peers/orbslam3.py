@@ -17,6 +17,11 @@ follow issue 8's notes, measured with pyorbslam3 0.1.1:
   EuRoC layout with zero distortion and go the same way.
 - only frames whose tracking state is OK are kept (a briefly lost frame comes back with
   ``pose_valid`` and an identity pose); new maps and resets are counted from its log.
+- OK frames whose pose repeats the first OK pose exactly (``frozen_frames``) are not kept
+  either: on KITTI's dark hazy grid cells ORB-SLAM3 says OK on 26 of 51 frames while every
+  one of them is the identity, the car having driven 25 m (s20-heldout). The issue 9 rule
+  "where ORB-SLAM3 tracks at least half the frames" must not count poses that were never
+  estimated, the same rule Canopy's own ``trajectory.tum`` follows.
 
 ORB-SLAM3 needs a DBoW2 vocabulary; ``ORBvoc.txt`` cannot be downloaded here, so the first
 call trains one with our trainer (``canopy.place``, k=10, L=5) into
@@ -72,7 +77,7 @@ class PeerResult:
     """One ORB-SLAM3 run. ``trajectory``: rectified left camera, TUM stamps, OK frames only."""
 
     trajectory: Trajectory
-    tracked: int                   # frames whose state was OK
+    tracked: int                   # frames whose state was OK, frozen ones left out
     total: int                     # frames fed
     track_ms: np.ndarray           # (total,) time of each track_stereo() call
     resets: int                    # new maps + active-map resets after the first map (from its log)
@@ -84,6 +89,21 @@ class PeerResult:
     cpu_s: float = 0.0             # CPU time of the child (all ORB-SLAM3 threads)
     error: str | None = None       # set when the child crashed or timed out
     meta: dict = field(default_factory=dict)
+    frozen: int = 0                # OK frames that repeated the first pose exactly (not kept)
+
+
+FROZEN_POSE_TOL = 1e-9  # an estimate of a moving or even a hovering camera differs far more than this
+
+
+def frozen_frames(poses: np.ndarray, tol: float = FROZEN_POSE_TOL) -> np.ndarray:
+    """Mask of the frames after the first whose 4x4 pose equals the first one to ``tol`` in
+    every entry: ORB-SLAM3 reporting OK without having moved its estimate at all."""
+    poses = np.asarray(poses, np.float64).reshape(-1, 4, 4)
+    if len(poses) == 0:
+        return np.zeros(0, bool)
+    same = np.all(np.abs(poses - poses[0]) <= tol, axis=(1, 2))
+    same[0] = False  # the first pose is the map's origin: a real (initial) estimate
+    return same
 
 
 def available() -> tuple[bool, str]:
@@ -337,7 +357,9 @@ def run_stereo(sequence: str | Path | None, dataset: str, *, preprocess: Preproc
     shutil.rmtree(work, ignore_errors=True)
     maps = log.count("Creation of new map with id:")
     resets = max(maps - 1, 0) + log.count("Active map Reseting") + log.count("Reseting Atlas")
-    traj = Trajectory(np.asarray(r["stamps"]), np.asarray(r["poses"]).reshape(-1, 4, 4),
+    poses = np.asarray(r["poses"], np.float64).reshape(-1, 4, 4)
+    keep = ~frozen_frames(poses)
+    traj = Trajectory(np.asarray(r["stamps"], np.float64)[keep], poses[keep],
                       meta={"frame": "rectified left camera", "system": "orbslam3"})
     final = Trajectory(*r["final"], meta={"system": "orbslam3", "kind": "final"}) if r["final"] else None
     meta["settings"] = r["settings"]
@@ -345,4 +367,4 @@ def run_stereo(sequence: str | Path | None, dataset: str, *, preprocess: Preproc
     meta["final_trajectory_error"] = final_note
     return PeerResult(traj, len(traj), r["total"], np.asarray(r["track_ms"]), resets, version(), tail,
                       loops=log.count(LOOP_PATTERN), final_trajectory=final, wall_s=r["wall_s"],
-                      cpu_s=r["cpu_s"], meta=meta)
+                      cpu_s=r["cpu_s"], meta=meta, frozen=int((~keep).sum()))
