@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from canopy.enhance.noise import estimate_noise
 from canopy.frontend.features import Features
 from canopy.frontend.noisy_features import refinement_pair
 from canopy.frontend.params import TrackingParams
@@ -50,8 +49,6 @@ def fill_active(left: Features, params: TrackingParams, left_img: np.ndarray | N
     if sig is None:
         if params.stereo_fill_enhanced_min_sensor_sigma > 0:
             return sensor_fill_open(sensor_sigma, params)
-        if params.stereo_fill_enhanced_min_sigma > 0:
-            return enhanced_fill_active(left_img, params, noise_sigma)
         return params.stereo_fill_min_sigma <= 0 and params.stereo_fill_max_sigma <= 0 and params.stereo_fill_max_texture <= 0
     if params.stereo_fill_max_texture > 0 and noise_sigma is None and left_img is None:
         raise ValueError("fill_active: stereo_fill_max_texture needs noise_sigma or left_img")
@@ -61,7 +58,7 @@ def fill_active(left: Features, params: TrackingParams, left_img: np.ndarray | N
 
 def _in_band_and_flat(robust: float, low: float, top: float, max_texture: float,
                       img: np.ndarray | None, noise_sigma: float | None) -> bool:
-    """Both gates' test: the robust sigma in [low, top) (top 0: unbounded) and, with max_texture > 0,
+    """The raw-frame test: the robust sigma in [low, top) (top 0: unbounded) and, with max_texture > 0,
     the texture excess (the mean |Laplacian| sigma ``noise_sigma``, measured on ``img`` when None,
     minus the robust one) below max_texture."""
     if robust < low or (top > 0 and robust >= top):
@@ -79,11 +76,13 @@ def sensor_fill_open(sensor_sigma: float | None, params: TrackingParams) -> bool
     [``stereo_fill_enhanced_min_sensor_sigma``, ``stereo_fill_enhanced_max_sensor_sigma``) (max 0:
     unbounded). False without the figure (a caller that does not hand it over).
 
-    Why this figure and not one measured on the enhanced image: before the denoiser the lifted image
-    still carries the sensor's noise times AFE's gain, which the scene's fine texture barely moves (the
-    robust median-of-|Laplacian| estimate), while after it the residual is mostly texture (the enhanced
-    image's robust sigma separates the noisy day-loop cell from the clean presets by 0.3 grey levels,
-    docs/notes/s19-dimfill.md; this one by several: docs/notes/s20-dimsigma.md)."""
+    Why this figure and not one measured on the enhanced image (s19's gate, removed): before the
+    denoiser the lifted image still carries the sensor's noise times AFE's gain, which the scene's fine
+    texture barely moves (the robust median-of-|Laplacian| estimate), while after it the residual is
+    mostly texture: the enhanced image's robust sigma kept the noisy day-loop cell (>= 2.17) apart from
+    the clean presets (<= 1.83 where flat) by 0.3 grey levels (docs/notes/s19-dimfill.md); this figure
+    reads 14.6-16.1 on that cell against at most 9.21 on every frame of the clean presets (dark frames
+    are floored at ``auto_dark_min_sigma``, 4; docs/notes/s20-dimsigma.md)."""
     if sensor_sigma is None or sensor_sigma < params.stereo_fill_enhanced_min_sensor_sigma:
         return False
     top = params.stereo_fill_enhanced_max_sensor_sigma
@@ -100,28 +99,6 @@ def fill_by_sensor_sigma(matches: StereoMatches, left: Features, left_img: np.nd
             or params.stereo_fill_enhanced_min_sensor_sigma <= 0 or not sensor_fill_open(sensor_sigma, params)):
         return matches
     return fill_unmatched_by_flow(matches, left, left_img, right_img, calib, params, noise_sigma, pyramids)
-
-
-def enhanced_fill_active(left_img: np.ndarray | None, params: TrackingParams,
-                         noise_sigma: float | None = None) -> bool:
-    """The fill-in gate of a frame the enhancement changed (no ``Features.robust_noise_sigma``):
-    the enhanced left image's robust sigma (``estimate_noise``, rows_fraction 0.5) in
-    [``stereo_fill_enhanced_min_sigma``, ``stereo_fill_enhanced_max_sigma``) (max 0: unbounded) and, with ``stereo_fill_enhanced_max_texture`` > 0, its texture
-    excess (``noise_sigma`` - robust sigma; ``noise_sigma`` the tracker's mean Immerkaer figure of the
-    same image, measured here when None) below it. False without an image (the appearance-first
-    stage of ``appearance_first_matches`` has none).
-
-    Why the enhanced image: the tracker sees only the enhanced pair. After AFE + the denoiser the
-    residual noise still tells the noisy sensor from a dark clean scene: sampled every 15th frame of the
-    first 300, the day-loop g0.15-b0.06-high cell measures robust 2.20-2.37 (texture excess 0.7-0.9),
-    the clean dark-rows preset 1.09-1.83, the clean dusk-loop's enhanced frames up to 2.89 but those above
-    1.82 textured (excess >= 2), the clean haze-row's dehazed frames 5.4-5.7 (hence the upper bound);
-    docs/notes/s19-dimfill.md."""
-    if left_img is None:
-        return False
-    return _in_band_and_flat(estimate_noise(left_img, rows_fraction=0.5), params.stereo_fill_enhanced_min_sigma,
-                             params.stereo_fill_enhanced_max_sigma, params.stereo_fill_enhanced_max_texture,
-                             left_img, noise_sigma)
 
 
 def fill_unmatched_by_flow(matches: StereoMatches, left: Features, left_img: np.ndarray, right_img: np.ndarray,
