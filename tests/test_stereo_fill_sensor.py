@@ -150,28 +150,3 @@ def test_the_tracking_actor_takes_the_figure_from_the_frame_message():
     assert actor._frame_arguments(frame, replace(handle, info={})) == {}   # no enhancement info: no figure
     actor.hands_sensor_sigma = False                                  # the mono tracker
     assert actor._frame_arguments(frame, handle) == {}
-
-
-def test_the_refinement_blur_only_on_gated_frames():
-    from canopy.frontend.stereo_fill import sensor_gated_params
-
-    p = _gate(stereo_fill_enhanced_blur=2.0)
-    assert TrackingParams().stereo_fill_enhanced_blur == 0.0
-    assert sensor_gated_params(p, 4.0) is p and sensor_gated_params(p, None) is p   # gate shut
-    no_blur = _gate()
-    assert sensor_gated_params(no_blur, 15.0) is no_blur                             # blur 0: off
-    blurred = sensor_gated_params(p, 15.0)
-    assert (blurred.subpixel_denoise_sigma > 0, blurred.subpixel_denoise_blur) == (True, 2.0)
-    assert sensor_gated_params(p, 15.0) is blurred                                   # built once per params
-    # on the noisy enhanced pair: the blurred refinement is what frame_stereo runs, and it moves the depths
-    src, _, left, right, info = _enhanced_pair(True)
-    fl, fr = _features(p, left, right)
-    scale = p.scale_factor ** np.arange(p.n_levels)
-    frame = StereoFrame(0, 0.0, left, right)
-    got = frame_stereo(fl, fr, frame, src.calibration, p, scale, None, sensor_sigma=info["noise_sigma"])
-    want = fill_unmatched_by_flow(match_stereo(fl, fr, left, right, src.calibration, blurred), fl, left, right,
-                                  src.calibration, blurred, None)
-    np.testing.assert_array_equal(got.depth, want.depth)
-    plain = frame_stereo(fl, fr, frame, src.calibration, _gate(), scale, None, sensor_sigma=info["noise_sigma"])
-    both = got.valid & plain.valid
-    assert both.sum() > 100 and not np.array_equal(got.u_right[both], plain.u_right[both])

@@ -356,9 +356,6 @@ class TrackingParams:
     # image's robust sigma and texture, docs/notes/s19-dimfill.md, is gone: it measured texture more than noise).
     stereo_fill_enhanced_min_sensor_sigma: float = 0.0
     stereo_fill_enhanced_max_sensor_sigma: float = 0.0
-    # ... and on those frames the SAD refinement (and the fill-in's flow) on the enhanced pair Gaussian-blurred
-    # with this sigma in px (the subpixel_denoise mechanism, which the enhanced image's own sigma never opens). 0: off.
-    stereo_fill_enhanced_blur: float = 0.0
     # Stereo points whose disparity the image cannot pin (canopy.frontend.keypoint_uncertainty; issue 9's
     # haze + noisy sensor): on frames whose robust noise sigma is >= uncertain_stereo_min_noise, a stereo
     # point whose Cramer-Rao disparity sigma (the 11x11 SAD window's x-gradients against the noise) is at
@@ -407,7 +404,6 @@ class TrackingParams:
         need(self.stereo_fill_enhanced_min_sensor_sigma >= 0, "stereo_fill_enhanced_min_sensor_sigma", "must be >= 0 (0: off)")
         need(self.stereo_fill_enhanced_max_sensor_sigma >= 0, "stereo_fill_enhanced_max_sensor_sigma",
              "must be >= 0 (0: no upper bound)")
-        need(self.stereo_fill_enhanced_blur >= 0, "stereo_fill_enhanced_blur", "must be >= 0 (0: off)")
         need(self.noisy_extractor_max_texture >= 0, "noisy_extractor_max_texture", "must be >= 0 (0: no test)")
         need(self.noisy_extractor_max_texture == 0 or self.noisy_extractor_robust, "noisy_extractor_max_texture",
              "needs noisy_extractor_robust: true (the excess is mean - robust sigma)")

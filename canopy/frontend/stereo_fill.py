@@ -20,8 +20,6 @@ trajectory worse on every noise draw (docs/notes/s13-haze.md).
 """
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 
 from canopy.frontend.features import Features
@@ -89,27 +87,6 @@ def sensor_fill_open(sensor_sigma: float | None, params: TrackingParams) -> bool
         return False
     top = params.stereo_fill_enhanced_max_sensor_sigma
     return top <= 0 or sensor_sigma < top
-
-
-def sensor_gated_params(params: TrackingParams, sensor_sigma: float | None) -> TrackingParams:
-    """``params`` for the stereo matching of a frame the sensor gate opens with ``stereo_fill_enhanced_blur``
-    > 0: the SAD refinement on the pair Gaussian-blurred with that sigma (``subpixel_denoise_sigma`` at
-    its smallest, so ``noisy_features.refinement_pair`` always blurs); else ``params`` itself. Why: on
-    the day-loop g0.15-b0.06-high cell the enhanced pair's matches within 5 m sit 0.70 px (descriptor) /
-    0.80 px (fill-in) from the exact disparity (median), 0.46-0.53 px with a 1-2 px blur (the clean
-    day-loop: 0.21); docs/notes/s20-dimsigma.md."""
-    blur = params.stereo_fill_enhanced_blur
-    if (blur <= 0 or not params.stereo_fill or params.stereo_fill_enhanced_min_sensor_sigma <= 0
-            or not sensor_fill_open(sensor_sigma, params)):
-        return params
-    key = (id(params), blur)
-    cached = _BLURRED.get(key)
-    if cached is None or cached[0] is not params:
-        cached = _BLURRED[key] = (params, replace(params, subpixel_denoise_sigma=1e-6, subpixel_denoise_blur=blur))
-    return cached[1]
-
-
-_BLURRED: dict = {}  # (id(params), blur) -> (params, their blurred-refinement copy)
 
 
 def fill_by_sensor_sigma(matches: StereoMatches, left: Features, left_img: np.ndarray, right_img: np.ndarray,

@@ -24,7 +24,7 @@ from canopy.frontend.features import Features, OrbExtractor
 from canopy.frontend.keypoint_centres import centre_keypoints
 from canopy.frontend.params import TrackingParams
 from canopy.frontend.stereo import PairPyramids, StereoMatches, match_stereo
-from canopy.frontend.stereo_fill import fill_by_sensor_sigma, sensor_gated_params
+from canopy.frontend.stereo_fill import fill_by_sensor_sigma
 from shared.types import StereoCalibration, StereoFrame
 
 
@@ -65,7 +65,6 @@ def frame_stereo(left: Features, right: Features | None, frame: StereoFrame, cal
     ``centre_level_keypoints`` the right-image columns are mapped to pixel centres as the left
     keypoints are (``centre_keypoints``: per octave, so it needs the uncentred left features).
     ``pyramids``: the raw pair's ``PairPyramids`` if built ahead."""
-    params = sensor_gated_params(params, sensor_sigma)  # the refinement's blur on gated frames, if set
     stereo = match_stereo(left, right, frame.left, frame.right, calib, params, noise_sigma, pyramids)
     stereo = fill_by_sensor_sigma(stereo, left, frame.left, frame.right, calib, params, noise_sigma, sensor_sigma,
                                   pyramids)
