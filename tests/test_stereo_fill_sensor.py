@@ -85,6 +85,14 @@ def test_off_by_default_and_refused_when_negative():
             replace(TrackingParams(), **bad).validate()
 
 
+def test_synthetic_config_opens_it_above_the_clean_presets():
+    t = load_run_config("synthetic").tracking
+    assert (t.stereo_fill, t.stereo_fill_min_sigma) == (True, 5.5)           # the raw-frame rule, as before
+    # every frame of the clean presets: the enhancement's sigma <= 9.21; the grid's dim noisy cells >= 13.49
+    assert 9.21 < t.stereo_fill_enhanced_min_sensor_sigma < 13.49
+    assert t.stereo_fill_enhanced_max_sensor_sigma == 0.0
+
+
 def test_the_band_and_the_missing_figure():
     p = _gate()
     assert sensor_fill_open(11.0, p) and sensor_fill_open(40.0, p)       # [min, unbounded)
