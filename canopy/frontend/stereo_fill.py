@@ -78,7 +78,7 @@ def sensor_fill_open(sensor_sigma: float | None, params: TrackingParams) -> bool
 
     Why this figure and not one measured on the enhanced image (s19's gate, removed): before the
     denoiser the lifted image still carries the sensor's noise times AFE's gain, which the scene's fine
-    texture barely moves (the robust median-of-|Laplacian| estimate), while after it the residual is
+    texture barely moves (the robust Immerkaer / MAD estimate), while after it the residual is
     mostly texture: the enhanced image's robust sigma kept the noisy day-loop cell (>= 2.17) apart from
     the clean presets (<= 1.83 where flat) by 0.3 grey levels (docs/notes/s19-dimfill.md); this figure
     reads 14.6-16.1 on that cell against at most 9.21 on every frame of the clean presets (dark frames
