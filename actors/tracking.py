@@ -67,6 +67,7 @@ class TrackingActor(Actor):
         self.adaptive_fast = bool(enh is not None and getattr(enh, "adaptive_fast", False)
                                   and enh.method in ADAPTIVE_FAST_METHODS)
         self.enhancement = enh
+        self.hands_sensor_sigma = isinstance(self.tracker, Tracker)  # the mono tracker takes no sensor sigma
         self.n_features = int(getattr(c["params"], "n_features", 0))
         self.counts = {"ok": 0, "lost": 0, "init": 0, "predicted": 0, "keyframes": 0}
         self.loop_epoch = 0  # loop corrections received from local mapping
@@ -139,7 +140,7 @@ class TrackingActor(Actor):
                 # the frame's ORB and stereo matches need no map: computed while local mapping may
                 # still be adjusting the keyframe whose update is due now (the same result)
                 self._start_sched()
-                extracted = self.tracker.extract(frame, **self._fast_arguments(frame, handle))
+                extracted = self.tracker.extract(frame, **self._frame_arguments(frame, handle))
                 t0 = time.perf_counter()
                 self._apply_due_updates(index, ctx)
                 self._track(frame, handle, ctx, extracted, time.perf_counter() - t0)
@@ -153,6 +154,18 @@ class TrackingActor(Actor):
         if self.sched_start is None:  # the threads' statistics from the first frame on
             self.sched_start = thread_schedstat()
             self.sched_start_wall = time.perf_counter()
+
+    def _frame_arguments(self, frame: StereoFrame, handle: FrameHandle) -> dict:
+        """The stereo tracker's per-frame arguments from the enhancement: the FAST rule's, and the
+        enhancement's own noise sigma of the pair (``handle.info["noise_sigma"]``, 0 on frames it did not
+        denoise; absent from a handle without enhancement info), which gates the stereo fill-in on
+        enhanced frames (``canopy.frontend.stereo_fill.sensor_fill_open``): the tracker sees only the
+        enhanced pair, whose own residual noise tells texture from sensor noise far less cleanly."""
+        kw = self._fast_arguments(frame, handle)
+        sigma = (handle.info or {}).get("noise_sigma")
+        if self.hands_sensor_sigma and sigma is not None:
+            kw["sensor_sigma"] = float(sigma)
+        return kw
 
     def _fast_arguments(self, frame: StereoFrame, handle: FrameHandle) -> dict:
         # AFE Eq. 18, and Eq. 19 when too few corners result; only on frames the enhancement changed
@@ -171,7 +184,7 @@ class TrackingActor(Actor):
         if extracted is not None:
             res = self.tracker.track_extracted(extracted, paused_s)
         else:
-            res = self.tracker.track(frame, **self._fast_arguments(frame, handle))
+            res = self.tracker.track(frame, **self._frame_arguments(frame, handle))
         self.counts[res.status] = self.counts.get(res.status, 0) + 1
         self.n_tracked += 1
         for key, ms in res.timings.items():

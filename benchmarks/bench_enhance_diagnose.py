@@ -111,7 +111,8 @@ def run(path, clean_path, dataset, enh_sets, track_sets, max_frames=None, per_fr
             ref = disparity_sgbm(c.left, c.right).astype(np.float64)
             ref[ref <= 0] = -1.0
             row.update(stereo_errors(tracker, frame, kw, ref))
-        res = tracker.track(frame, **kw)
+        # the enhancement's noise sigma of the pair, as actors/tracking.py hands it over (the fill-in gate)
+        res = tracker.track(frame, **kw, sensor_sigma=info["noise_sigma"])
         row.update(status=res.status, inl=int(res.n_inliers), matches=int(res.n_matches),
                    noise=res.noise_sigma, reason=res.lost_reason)
         if res.is_keyframe and res.keyframe is not None:

@@ -349,14 +349,13 @@ class TrackingParams:
     stereo_fill_min_sigma: float = 0.0
     stereo_fill_max_sigma: float = 0.0
     stereo_fill_max_texture: float = 0.0  # ... and texture excess (mean - robust sigma) below this (0: no test)
-    # s19-dimfill: frames the enhancement changed carry no robust sigma (the extractor measures it on raw
-    # frames only); with stereo_fill_enhanced_min_sigma > 0 they get the fill-in when the *enhanced* left
-    # image's robust sigma is in [stereo_fill_enhanced_min_sigma, stereo_fill_enhanced_max_sigma) (max 0: no
-    # upper bound) and its texture excess is below stereo_fill_enhanced_max_texture (0: no test).
-    # 0: off (docs/notes/s19-dimfill.md).
-    stereo_fill_enhanced_min_sigma: float = 0.0
-    stereo_fill_enhanced_max_sigma: float = 0.0
-    stereo_fill_enhanced_max_texture: float = 0.0
+    # s20-dimsigma: frames the enhancement changed carry no robust sigma (the extractor measures it on raw
+    # frames only); with stereo_fill_enhanced_min_sensor_sigma > 0 they get the fill-in when the enhancement's
+    # own noise sigma of the frame (the lifted image's, before its denoiser; handed over with the frame) is in
+    # [min, max) (max 0: no upper bound). 0: off (docs/notes/s20-dimsigma.md; s19's gate on the enhanced
+    # image's robust sigma and texture, docs/notes/s19-dimfill.md, is gone: it measured texture more than noise).
+    stereo_fill_enhanced_min_sensor_sigma: float = 0.0
+    stereo_fill_enhanced_max_sensor_sigma: float = 0.0
     # Stereo points whose disparity the image cannot pin (canopy.frontend.keypoint_uncertainty; issue 9's
     # haze + noisy sensor): on frames whose robust noise sigma is >= uncertain_stereo_min_noise, a stereo
     # point whose Cramer-Rao disparity sigma (the 11x11 SAD window's x-gradients against the noise) is at
@@ -402,9 +401,9 @@ class TrackingParams:
         need(self.stereo_fill_min_sigma >= 0, "stereo_fill_min_sigma", "must be >= 0")
         need(self.stereo_fill_max_sigma >= 0, "stereo_fill_max_sigma", "must be >= 0 (0: no upper bound)")
         need(self.stereo_fill_max_texture >= 0, "stereo_fill_max_texture", "must be >= 0 (0: no test)")
-        need(self.stereo_fill_enhanced_min_sigma >= 0, "stereo_fill_enhanced_min_sigma", "must be >= 0 (0: off)")
-        need(self.stereo_fill_enhanced_max_sigma >= 0, "stereo_fill_enhanced_max_sigma", "must be >= 0 (0: no upper bound)")
-        need(self.stereo_fill_enhanced_max_texture >= 0, "stereo_fill_enhanced_max_texture", "must be >= 0 (0: no test)")
+        need(self.stereo_fill_enhanced_min_sensor_sigma >= 0, "stereo_fill_enhanced_min_sensor_sigma", "must be >= 0 (0: off)")
+        need(self.stereo_fill_enhanced_max_sensor_sigma >= 0, "stereo_fill_enhanced_max_sensor_sigma",
+             "must be >= 0 (0: no upper bound)")
         need(self.noisy_extractor_max_texture >= 0, "noisy_extractor_max_texture", "must be >= 0 (0: no test)")
         need(self.noisy_extractor_max_texture == 0 or self.noisy_extractor_robust, "noisy_extractor_max_texture",
              "needs noisy_extractor_robust: true (the excess is mean - robust sigma)")

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from canopy.enhance.noise import estimate_noise
 from canopy.frontend.features import Features
 from canopy.frontend.noisy_features import refinement_pair
 from canopy.frontend.params import TrackingParams
@@ -33,7 +32,7 @@ from shared.types import StereoCalibration
 
 
 def fill_active(left: Features, params: TrackingParams, left_img: np.ndarray | None = None,
-                noise_sigma: float | None = None) -> bool:
+                noise_sigma: float | None = None, sensor_sigma: float | None = None) -> bool:
     """True when this frame's unmatched keypoints get the flow fill-in: ``stereo_fill`` on, the
     robust noise sigma the extractor measured (``Features.robust_noise_sigma``) in
     [``stereo_fill_min_sigma``, ``stereo_fill_max_sigma``), and with ``stereo_fill_max_texture`` > 0
@@ -42,13 +41,14 @@ def fill_active(left: Features, params: TrackingParams, left_img: np.ndarray | N
     ``noise_sigma`` is None) below it: haze flattens the texture (KITTI 0.2-1.9 grey levels at beta
     0.03-0.06, clean 3.4-4.5, the noise-only cells 2.4-4.1; canopy.frontend.noisy_features).
     Frames without a robust sigma (KITTI: those the enhancement changed) get no fill-in unless the
-    band is unbounded."""
+    band is unbounded, or ``sensor_fill_open`` says so (``stereo_fill_enhanced_min_sensor_sigma`` > 0:
+    ``sensor_sigma`` is the enhancement's own noise figure of the frame)."""
     if not params.stereo_fill:
         return False
     sig = left.robust_noise_sigma
     if sig is None:
-        if params.stereo_fill_enhanced_min_sigma > 0:
-            return enhanced_fill_active(left_img, params, noise_sigma)
+        if params.stereo_fill_enhanced_min_sensor_sigma > 0:
+            return sensor_fill_open(sensor_sigma, params)
         return params.stereo_fill_min_sigma <= 0 and params.stereo_fill_max_sigma <= 0 and params.stereo_fill_max_texture <= 0
     if params.stereo_fill_max_texture > 0 and noise_sigma is None and left_img is None:
         raise ValueError("fill_active: stereo_fill_max_texture needs noise_sigma or left_img")
@@ -58,7 +58,7 @@ def fill_active(left: Features, params: TrackingParams, left_img: np.ndarray | N
 
 def _in_band_and_flat(robust: float, low: float, top: float, max_texture: float,
                       img: np.ndarray | None, noise_sigma: float | None) -> bool:
-    """Both gates' test: the robust sigma in [low, top) (top 0: unbounded) and, with max_texture > 0,
+    """The raw-frame test: the robust sigma in [low, top) (top 0: unbounded) and, with max_texture > 0,
     the texture excess (the mean |Laplacian| sigma ``noise_sigma``, measured on ``img`` when None,
     minus the robust one) below max_texture."""
     if robust < low or (top > 0 and robust >= top):
@@ -69,26 +69,36 @@ def _in_band_and_flat(robust: float, low: float, top: float, max_texture: float,
     return mean - robust < max_texture
 
 
-def enhanced_fill_active(left_img: np.ndarray | None, params: TrackingParams,
-                         noise_sigma: float | None = None) -> bool:
-    """The fill-in gate of a frame the enhancement changed (no ``Features.robust_noise_sigma``):
-    the enhanced left image's robust sigma (``estimate_noise``, rows_fraction 0.5) in
-    [``stereo_fill_enhanced_min_sigma``, ``stereo_fill_enhanced_max_sigma``) (max 0: unbounded) and, with ``stereo_fill_enhanced_max_texture`` > 0, its texture
-    excess (``noise_sigma`` - robust sigma; ``noise_sigma`` the tracker's mean Immerkaer figure of the
-    same image, measured here when None) below it. False without an image (the appearance-first
-    stage of ``appearance_first_matches`` has none).
+def sensor_fill_open(sensor_sigma: float | None, params: TrackingParams) -> bool:
+    """The fill-in gate of a frame the enhancement changed, by the enhancement's own noise sigma of it
+    (``info["noise_sigma"]``: ``estimate_noise`` on the AFE-lifted left image before the denoiser, the
+    sigma the denoiser is set with; 0 on frames it did not denoise) in
+    [``stereo_fill_enhanced_min_sensor_sigma``, ``stereo_fill_enhanced_max_sensor_sigma``) (max 0:
+    unbounded). False without the figure (a caller that does not hand it over).
 
-    Why the enhanced image: the tracker sees only the enhanced pair. After AFE + the denoiser the
-    residual noise still tells the noisy sensor from a dark clean scene: sampled every 15th frame of the
-    first 300, the day-loop g0.15-b0.06-high cell measures robust 2.20-2.37 (texture excess 0.7-0.9),
-    the clean dark-rows preset 1.09-1.83, the clean dusk-loop's enhanced frames up to 2.89 but those above
-    1.82 textured (excess >= 2), the clean haze-row's dehazed frames 5.4-5.7 (hence the upper bound);
-    docs/notes/s19-dimfill.md."""
-    if left_img is None:
+    Why this figure and not one measured on the enhanced image (s19's gate, removed): before the
+    denoiser the lifted image still carries the sensor's noise times AFE's gain, which the scene's fine
+    texture barely moves (the robust Immerkaer / MAD estimate), while after it the residual is
+    mostly texture: the enhanced image's robust sigma kept the noisy day-loop cell (>= 2.17) apart from
+    the clean presets (<= 1.83 where flat) by 0.3 grey levels (docs/notes/s19-dimfill.md); this figure
+    reads 14.6-16.1 on that cell against at most 9.21 on every frame of the clean presets (dark frames
+    are floored at ``auto_dark_min_sigma``, 4; docs/notes/s20-dimsigma.md)."""
+    if sensor_sigma is None or sensor_sigma < params.stereo_fill_enhanced_min_sensor_sigma:
         return False
-    return _in_band_and_flat(estimate_noise(left_img, rows_fraction=0.5), params.stereo_fill_enhanced_min_sigma,
-                             params.stereo_fill_enhanced_max_sigma, params.stereo_fill_enhanced_max_texture,
-                             left_img, noise_sigma)
+    top = params.stereo_fill_enhanced_max_sensor_sigma
+    return top <= 0 or sensor_sigma < top
+
+
+def fill_by_sensor_sigma(matches: StereoMatches, left: Features, left_img: np.ndarray, right_img: np.ndarray,
+                         calib: StereoCalibration, params: TrackingParams, noise_sigma: float | None,
+                         sensor_sigma: float | None, pyramids=None) -> StereoMatches:
+    """``matches`` (``match_stereo``'s, which has no sensor sigma and so never fills an enhanced frame
+    under this gate) with the fill-in when ``sensor_fill_open``: the same call ``match_stereo`` makes
+    last, so a frame the gate opens gets what ``match_stereo`` would give it with the gate passed in."""
+    if (not params.stereo_fill or params.stereo_matcher == "flow" or left.robust_noise_sigma is not None
+            or params.stereo_fill_enhanced_min_sensor_sigma <= 0 or not sensor_fill_open(sensor_sigma, params)):
+        return matches
+    return fill_unmatched_by_flow(matches, left, left_img, right_img, calib, params, noise_sigma, pyramids)
 
 
 def fill_unmatched_by_flow(matches: StereoMatches, left: Features, left_img: np.ndarray, right_img: np.ndarray,
@@ -125,12 +135,12 @@ def appearance_first_matches(tracker, view, feats: Features, enough: int):
     40 px window matches then hold a RANSAC consensus of far points that fixes the rotation but not
     the translation (KITTI g1-b0.06-low with the fill-in: frame 1 214-314 mm off on three noise draws,
     12-16 mm with the descriptor matches first; docs/notes/s13-haze.md). ``tracker``: the Tracker
-    (its ``params``, ``_frame_noise_sigma`` and ``_appearance_matches``)."""
+    (its ``params``, ``_frame_noise_sigma``, ``_frame_sensor_sigma`` and ``_appearance_matches``)."""
     sigma = getattr(tracker, "_frame_noise_sigma", None)
     p = tracker.params
     if p.stereo_fill_max_texture > 0 and sigma is None:
         return None  # the texture test needs the tracker's noise figure (fast_noise_factor > 0)
-    if not fill_active(feats, p, None, sigma):
+    if not fill_active(feats, p, None, sigma, getattr(tracker, "_frame_sensor_sigma", None)):
         return None
     cand = tracker._appearance_matches(view, feats)
     return cand if len(cand[1]) >= enough else None

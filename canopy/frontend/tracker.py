@@ -170,13 +170,18 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
 
     # ------------------------------------------------------------------ main entry
     def track(self, frame: StereoFrame, fast_threshold: int | None = None,
-              fast_fallback: int | None = None, fast_min_keypoints: int = 0) -> TrackingResult:
+              fast_fallback: int | None = None, fast_min_keypoints: int = 0,
+              sensor_sigma: float | None = None) -> TrackingResult:
         """Track one stereo frame. ``fast_threshold`` / ``fast_fallback`` override the
-        FAST threshold (AFE Eq. 18 / Eq. 19 when too few of ``fast_min_keypoints``)."""
-        return self.track_extracted(self.extract(frame, fast_threshold, fast_fallback, fast_min_keypoints))
+        FAST threshold (AFE Eq. 18 / Eq. 19 when too few of ``fast_min_keypoints``); ``sensor_sigma``:
+        the enhancement's noise sigma of the frame (its ``info["noise_sigma"]``; None: not handed over),
+        for the fill-in gate of enhanced frames (``stereo_fill.sensor_fill_open``)."""
+        return self.track_extracted(self.extract(frame, fast_threshold, fast_fallback, fast_min_keypoints,
+                                                 sensor_sigma))
 
     def extract(self, frame: StereoFrame, fast_threshold: int | None = None,
-                fast_fallback: int | None = None, fast_min_keypoints: int = 0) -> ExtractedFrame:
+                fast_fallback: int | None = None, fast_min_keypoints: int = 0,
+                sensor_sigma: float | None = None) -> ExtractedFrame:
         """The first half of ``track``: the frame's noise, its left ORB features (this thread) and
         its stereo matches (with ``parallel_stereo`` a job left running on the worker). None of it
         reads the local map, so a lockstep run may call this before applying the map updates due
@@ -187,6 +192,7 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
         t_all = t0 = _clock()
         self._stereo_last = self._stereo_raw = None
         noise_sigma = self._frame_noise_sigma = None
+        self._frame_sensor_sigma = sensor_sigma
         if self.params.fast_noise_factor > 0:
             # FAST threshold floor from the image noise (track_health): corners from the signal
             noise_sigma = self._frame_noise_sigma = image_noise_sigma(frame.left)
@@ -198,7 +204,7 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
                     fast_fallback = max(int(fast_fallback), min(floor, 254) // 2)
             _stage(timings, "noise_estimate", t0)
         left, stereo, line_job = self._left_and_stereo(frame, (fast_threshold, fast_fallback, fast_min_keypoints),
-                                                       noise_sigma, timings)
+                                                       noise_sigma, timings, sensor_sigma)
         self._contour_inputs = (frame.left, frame.right, left)  # for _stereo's contour test
         return ExtractedFrame(frame, left, stereo, line_job, noise_sigma, timings, t_all)
 

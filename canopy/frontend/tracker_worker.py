@@ -24,6 +24,7 @@ from canopy.frontend.features import Features, OrbExtractor
 from canopy.frontend.keypoint_centres import centre_keypoints
 from canopy.frontend.params import TrackingParams
 from canopy.frontend.stereo import PairPyramids, StereoMatches, match_stereo
+from canopy.frontend.stereo_fill import fill_by_sensor_sigma
 from shared.types import StereoCalibration, StereoFrame
 
 
@@ -56,12 +57,17 @@ class ExtractedFrame:
 
 def frame_stereo(left: Features, right: Features | None, frame: StereoFrame, calib: StereoCalibration,
                  params: TrackingParams, scale_factors: np.ndarray,
-                 noise_sigma: float | None, pyramids: PairPyramids | None = None) -> StereoMatches:
-    """Stereo matches of one frame for the left features as OpenCV reports them; with
+                 noise_sigma: float | None, pyramids: PairPyramids | None = None,
+                 sensor_sigma: float | None = None) -> StereoMatches:
+    """Stereo matches of one frame for the left features as OpenCV reports them (on an enhanced frame
+    with the fill-in if the enhancement's noise sigma ``sensor_sigma`` opens its gate,
+    ``stereo_fill.fill_by_sensor_sigma``); with
     ``centre_level_keypoints`` the right-image columns are mapped to pixel centres as the left
     keypoints are (``centre_keypoints``: per octave, so it needs the uncentred left features).
     ``pyramids``: the raw pair's ``PairPyramids`` if built ahead."""
     stereo = match_stereo(left, right, frame.left, frame.right, calib, params, noise_sigma, pyramids)
+    stereo = fill_by_sensor_sigma(stereo, left, frame.left, frame.right, calib, params, noise_sigma, sensor_sigma,
+                                  pyramids)
     if params.centre_level_keypoints:
         stereo = centre_keypoints(left, stereo, scale_factors, calib.width, calib.height)[1]
     return stereo
@@ -89,11 +95,11 @@ class StereoJob:
 
     def __init__(self, pool: Executor, extractor: OrbExtractor, frame: StereoFrame, calib: StereoCalibration,
                  params: TrackingParams, scale_factors: np.ndarray, noise_sigma: float | None,
-                 fast: tuple[int | None, int | None, int], prebuild: bool = False):
+                 fast: tuple[int | None, int | None, int], prebuild: bool = False, sensor_sigma: float | None = None):
         self._left: Future = Future()
         self.timings: dict[str, float] = {}
         self._future = pool.submit(self._run, extractor, frame, calib, params, scale_factors, noise_sigma, fast,
-                                   prebuild)
+                                   prebuild, sensor_sigma)
 
     def set_left(self, left: Features) -> None:
         self._left.set_result(left)
@@ -101,7 +107,8 @@ class StereoJob:
     def left_failed(self, error: BaseException) -> None:
         self._left.set_exception(error)
 
-    def _run(self, extractor, frame, calib, params, scale_factors, noise_sigma, fast, prebuild) -> StereoMatches:
+    def _run(self, extractor, frame, calib, params, scale_factors, noise_sigma, fast, prebuild,
+             sensor_sigma) -> StereoMatches:
         t0 = stage_clock()
         # the flow matcher needs no right keypoints (canopy.frontend.stereo_flow)
         right = None if params.stereo_matcher == "flow" else extractor.extract(frame.right, *fast)
@@ -113,7 +120,7 @@ class StereoJob:
             record_stage(self.timings, "stereo_pyramids", t0)
         left = self._left.result()
         t0 = stage_clock()
-        stereo = frame_stereo(left, right, frame, calib, params, scale_factors, noise_sigma, pyramids)
+        stereo = frame_stereo(left, right, frame, calib, params, scale_factors, noise_sigma, pyramids, sensor_sigma)
         record_stage(self.timings, "stereo_worker", t0)
         return stereo
 
@@ -128,12 +135,14 @@ class TrackerFeaturesMixin:
     right image in the worker (``parallel_stereo``, a pending ``StereoJob``)."""
 
     def _left_and_stereo(self, frame: StereoFrame, fast: tuple[int | None, int | None, int], noise_sigma,
-                         timings: dict) -> tuple[Features, StereoMatches | StereoJob, object]:
-        """(left features, stereo matches or the pending job, the left image's line job or None)."""
+                         timings: dict, sensor_sigma: float | None = None) -> tuple[Features, StereoMatches | StereoJob, object]:
+        """(left features, stereo matches or the pending job, the left image's line job or None).
+        ``sensor_sigma``: the enhancement's noise sigma of the frame (``frame_stereo``)."""
         t0 = stage_clock()
         if self._parallel_stereo:
             job = StereoJob(self._pool, self.extractor_right, frame, self.calib, self.params, self.scale_factors,
-                            noise_sigma, fast, prebuild=getattr(self, "_stereo_raw_pair_hint", True))
+                            noise_sigma, fast, prebuild=getattr(self, "_stereo_raw_pair_hint", True),
+                            sensor_sigma=sensor_sigma)
             try:
                 left = self.extractor.extract(frame.left, *fast, noise_sigma=noise_sigma)
             except BaseException as error:
@@ -158,7 +167,8 @@ class TrackerFeaturesMixin:
             right = right_job.result() if self._pool is not None else self.extractor_right.extract(frame.right, *fast)
         record_stage(timings, "orb", t0)
         t0 = stage_clock()
-        stereo = frame_stereo(left, right, frame, self.calib, self.params, self.scale_factors, noise_sigma)
+        stereo = frame_stereo(left, right, frame, self.calib, self.params, self.scale_factors, noise_sigma,
+                              sensor_sigma=sensor_sigma)
         if self.params.centre_level_keypoints:
             left = centre_keypoints(left, None, self.scale_factors, self.calib.width, self.calib.height)[0]
         record_stage(timings, "stereo", t0)
