@@ -24,13 +24,16 @@ def test_issue9_checks_apply_both_criteria_per_cell():
             # ORB-SLAM3 lost: only "at least as good as ORB-SLAM3 raw" applies
             _row("dark", "auto", 100.0, 0.06), _row("dark", "orbslam3-raw", 41.0, None),
             _row("darker", "auto", 8.0, None), _row("darker", "orbslam3-raw", 24.0, None),
+            # ORB-SLAM3 keeps 1 of 51 frames: its ATE (0 over one pose) is not a trajectory to beat
+            _row("one-frame", "auto", 100.0, 0.10), _row("one-frame", "orbslam3-raw", 100.0 / 51, 0.0),
             _row("no-peer", "auto", 100.0, 0.05)]
     checks = {c["cell"]: c for c in grid.issue9_checks(rows)}
-    assert set(checks) == {"lit", "hazy", "dark", "darker"}  # a cell without ORB-SLAM3 beside it is not judged
+    assert set(checks) == {"lit", "hazy", "dark", "darker", "one-frame"}  # a cell without ORB-SLAM3 beside it is not judged
     assert checks["lit"]["pass"] and checks["lit"]["at_least_orb_raw"]
     assert checks["hazy"]["pass"] is False and not checks["hazy"]["at_least_orb_raw"]  # 4x clean, worse than ORB
     assert checks["dark"]["pass"] is None and checks["dark"]["at_least_orb_raw"]
     assert checks["darker"]["pass"] is None and not checks["darker"]["at_least_orb_raw"]  # 8 % < 24 %
+    assert checks["one-frame"]["pass"] is None and checks["one-frame"]["at_least_orb_raw"]
 
 
 
