@@ -2,16 +2,16 @@
 import sys
 from pathlib import Path
 import numpy as np
-sys.path.insert(0, "/work/wt/heldout")
+sys.path.insert(0, str(Path(__file__).resolve().parents[3]))  # the repository root
 from benchmarks.bench_degrade_grid import degraded_cell
 from benchmarks.peers import orbslam3 as orb
 from canopy.degrade import grid_cells
 from canopy.sources import BUNDLED_DATA
 for gain, beta, seed in ((0.15, 0.06, 0), (0.1, 0.03, 11)):
     cell = grid_cells((gain,), (beta,), ("high",), seed=seed)[0]
-    path, _ = degraded_cell("kitti", "kitti", BUNDLED_DATA["kitti"], cell, None, Path("/tmp"), Path("/tmp/heldout-cache"), "stereo")
+    path, _ = degraded_cell("kitti", "kitti", BUNDLED_DATA["kitti"], cell, None, Path("/tmp"), Path(sys.argv[1] if len(sys.argv) > 1 else "/tmp/heldout-cache"), "stereo")
     res = orb.run_stereo(str(path), "kitti")
     pos = res.trajectory.poses[:, :3, 3]
     rot_id = np.all(np.abs(res.trajectory.poses[:, :3, :3] - np.eye(3)) < 1e-9, axis=(1, 2))
-    print(cell.label, f"seed {seed}: tracked {res.tracked}/{res.total}, resets (new maps + resets) {res.resets}, "
+    print(cell.label, f"seed {seed}: tracked {res.tracked}/{res.total} (+{res.frozen} frozen, left out since s20), resets (new maps + resets) {res.resets}, "
           f"max |position| {np.abs(pos).max():.3g} m, identity rotation on {rot_id.sum()} of {len(rot_id)}", flush=True)
