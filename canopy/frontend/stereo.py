@@ -264,9 +264,12 @@ def stereo_candidates(left: Features, right: Features, tol: np.ndarray, octave_t
 
 def match_stereo(left: Features, right: Features | None, left_img: np.ndarray, right_img: np.ndarray,
                  calib: StereoCalibration, params: TrackingParams,
-                 noise_sigma: float | None = None, pyramids: PairPyramids | None = None) -> StereoMatches:
+                 noise_sigma: float | None = None, pyramids: PairPyramids | None = None,
+                 sensor_sigma: float | None = None) -> StereoMatches:
     """``noise_sigma``: the left image's noise (track_health.image_noise_sigma); with it the SAD
     outlier test is stricter on low-SNR (hazy, noisy) frames (canopy.frontend.noisy_features).
+    ``sensor_sigma``: the enhancement's own noise sigma of the frame, which opens the fill-in on
+    frames it changed (``stereo_fill.fill_active``); None where it was not handed over.
     With ``stereo_matcher: flow`` the right columns come from LK flow (canopy.frontend.stereo_flow)
     and ``right`` is not used (may be None). ``pyramids``: ``PairPyramids`` of the raw pair, if
     built ahead (the refinement uses them when it runs on the raw pair)."""
@@ -304,7 +307,7 @@ def match_stereo(left: Features, right: Features | None, left_img: np.ndarray, r
     out = StereoMatches(u_right, depth, n_candidates=len(qi))
     if params.stereo_fill:  # hazy frames: flow for the unmatched keypoints (canopy.frontend.stereo_fill)
         from canopy.frontend.stereo_fill import fill_active, fill_unmatched_by_flow  # imports this module
-        if fill_active(left, params, left_img, noise_sigma):
+        if fill_active(left, params, left_img, noise_sigma, sensor_sigma):
             out = fill_unmatched_by_flow(out, left, left_img, right_img, calib, params, noise_sigma, pyramids)
     return out
 

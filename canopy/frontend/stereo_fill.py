@@ -89,18 +89,6 @@ def sensor_fill_open(sensor_sigma: float | None, params: TrackingParams) -> bool
     return top <= 0 or sensor_sigma < top
 
 
-def fill_by_sensor_sigma(matches: StereoMatches, left: Features, left_img: np.ndarray, right_img: np.ndarray,
-                         calib: StereoCalibration, params: TrackingParams, noise_sigma: float | None,
-                         sensor_sigma: float | None, pyramids=None) -> StereoMatches:
-    """``matches`` (``match_stereo``'s, which has no sensor sigma and so never fills an enhanced frame
-    under this gate) with the fill-in when ``sensor_fill_open``: the same call ``match_stereo`` makes
-    last, so a frame the gate opens gets what ``match_stereo`` would give it with the gate passed in."""
-    if (not params.stereo_fill or params.stereo_matcher == "flow" or left.robust_noise_sigma is not None
-            or params.stereo_fill_enhanced_min_sensor_sigma <= 0 or not sensor_fill_open(sensor_sigma, params)):
-        return matches
-    return fill_unmatched_by_flow(matches, left, left_img, right_img, calib, params, noise_sigma, pyramids)
-
-
 def fill_unmatched_by_flow(matches: StereoMatches, left: Features, left_img: np.ndarray, right_img: np.ndarray,
                            calib: StereoCalibration, params: TrackingParams,
                            noise_sigma: float | None = None, pyramids=None) -> StereoMatches:

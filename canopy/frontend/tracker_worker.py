@@ -24,7 +24,6 @@ from canopy.frontend.features import Features, OrbExtractor
 from canopy.frontend.keypoint_centres import centre_keypoints
 from canopy.frontend.params import TrackingParams
 from canopy.frontend.stereo import PairPyramids, StereoMatches, match_stereo
-from canopy.frontend.stereo_fill import fill_by_sensor_sigma
 from shared.types import StereoCalibration, StereoFrame
 
 
@@ -61,13 +60,11 @@ def frame_stereo(left: Features, right: Features | None, frame: StereoFrame, cal
                  sensor_sigma: float | None = None) -> StereoMatches:
     """Stereo matches of one frame for the left features as OpenCV reports them (on an enhanced frame
     with the fill-in if the enhancement's noise sigma ``sensor_sigma`` opens its gate,
-    ``stereo_fill.fill_by_sensor_sigma``); with
+    ``stereo_fill.sensor_fill_open``); with
     ``centre_level_keypoints`` the right-image columns are mapped to pixel centres as the left
     keypoints are (``centre_keypoints``: per octave, so it needs the uncentred left features).
     ``pyramids``: the raw pair's ``PairPyramids`` if built ahead."""
-    stereo = match_stereo(left, right, frame.left, frame.right, calib, params, noise_sigma, pyramids)
-    stereo = fill_by_sensor_sigma(stereo, left, frame.left, frame.right, calib, params, noise_sigma, sensor_sigma,
-                                  pyramids)
+    stereo = match_stereo(left, right, frame.left, frame.right, calib, params, noise_sigma, pyramids, sensor_sigma)
     if params.centre_level_keypoints:
         stereo = centre_keypoints(left, stereo, scale_factors, calib.width, calib.height)[1]
     return stereo
