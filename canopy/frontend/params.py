@@ -356,6 +356,8 @@ class TrackingParams:
     # image's robust sigma and texture, docs/notes/s19-dimfill.md, is gone: it measured texture more than noise).
     stereo_fill_enhanced_min_sensor_sigma: float = 0.0
     stereo_fill_enhanced_max_sensor_sigma: float = 0.0
+    # s21-hazedepth: zero-mean SAD (subpixel_normalise "mean") on the frames the fill-in gate opens on (canopy.frontend.stereo)
+    subpixel_mean_on_fill: bool = False
     # Stereo points whose disparity the image cannot pin (canopy.frontend.keypoint_uncertainty; issue 9's
     # haze + noisy sensor): on frames whose robust noise sigma is >= uncertain_stereo_min_noise, a stereo
     # point whose Cramer-Rao disparity sigma (the 11x11 SAD window's x-gradients against the noise) is at

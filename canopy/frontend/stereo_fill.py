@@ -91,10 +91,12 @@ def sensor_fill_open(sensor_sigma: float | None, params: TrackingParams) -> bool
 
 def fill_unmatched_by_flow(matches: StereoMatches, left: Features, left_img: np.ndarray, right_img: np.ndarray,
                            calib: StereoCalibration, params: TrackingParams,
-                           noise_sigma: float | None = None, pyramids=None) -> StereoMatches:
+                           noise_sigma: float | None = None, pyramids=None,
+                           normalise: str | None = None) -> StereoMatches:
     """``matches`` with the keypoints it leaves unmatched matched by LK flow where the flow and the
     SAD tests accept them (see the module docstring); the matched ones unchanged. ``pyramids``: the
-    raw pair's ``PairPyramids`` if built ahead (used when the refinement runs on the raw pair)."""
+    raw pair's ``PairPyramids`` if built ahead (used when the refinement runs on the raw pair);
+    ``normalise``: the SAD's patch normalisation if not ``params.subpixel_normalise``."""
     if len(matches.depth) != len(left):
         raise ValueError(f"fill_unmatched_by_flow: matches has {len(matches.depth)} entries for {len(left)} keypoints")
     todo = np.flatnonzero(~matches.valid)
@@ -106,7 +108,7 @@ def fill_unmatched_by_flow(matches: StereoMatches, left: Features, left_img: np.
     ur_flow, ok = flow_right_columns(ref_left, ref_right, left.uv[todo].astype(np.float64), params, max_disp)
     li = todo[ok]
     li, ur, disp = refine_and_accept(ref_left, ref_right, left, li, ur_flow[ok], scale_factors, max_disp,
-                                     params, noise_sigma, pyramids)
+                                     params, noise_sigma, pyramids, normalise)
     u_right, depth = matches.u_right.copy(), matches.depth.copy()
     u_right[li] = ur
     depth[li] = calib.bf / disp

@@ -1,0 +1,88 @@
+"""Zero-mean SAD on the frames the stereo fill-in gate opens on (tracking.subpixel_mean_on_fill,
+canopy.frontend.stereo; issue 9's held-out lighter-haze cells, docs/notes/s21-hazedepth.md).
+
+A real KITTI 06 pair from ``data/`` gets the held-out grid's lighter haze (beta 0.03 /m, depth from SGBM on
+the clean pair, as tools/degrade_sequence.py) and the low-noise sensor, the cell whose trajectory was
+over issue 9's bar. On that pair the centre-pixel SAD's minimum jumps by whole pixels (the centre pixel's
+noise shifts every difference of a low-contrast patch); with the switch the stereo matches must agree
+better with the clean pair's disparities, and a clean pair (the gate closed) must keep exactly the
+matches it had.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from canopy.config import load_run_config
+from canopy.degrade import NOISE_LEVELS, DegradeParams, degrade_image, depth_from_stereo, disparity_sgbm, ray_length
+from canopy.frontend.noisy_features import tracking_extractor
+from canopy.frontend.params import TrackingParams
+from canopy.frontend.stereo import match_stereo
+from canopy.frontend.stereo_fill import fill_active
+from canopy.sources import open_source
+
+KITTI = Path(__file__).resolve().parents[1] / "data" / "kitti06_snippet"
+
+
+def _params(**kw):
+    return replace(load_run_config("kitti").tracking, parallel_extraction=False, **kw)
+
+
+def _pair(frame_index: int, beta: float):
+    src = open_source("kitti", KITTI)
+    f = src.frame(frame_index)
+    if beta == 0:
+        return src, f, f.left, f.right
+    ray = ray_length(depth_from_stereo(f.left, f.right, src.calibration), src.calibration)
+    cell = DegradeParams(mode="haze+noise", beta=beta, full_well=NOISE_LEVELS["low"][0],
+                         read_noise=NOISE_LEVELS["low"][1])
+    return src, f, degrade_image(f.left, cell, ray, rng=0), degrade_image(f.right, cell, ray, rng=1)
+
+
+def _matches(params, left_img, right_img, calib):
+    ex_l, ex_r = tracking_extractor(params, responses=False), tracking_extractor(params, responses=False)
+    fl, fr = ex_l.extract(left_img), ex_r.extract(right_img)
+    return fl, match_stereo(fl, fr, left_img, right_img, calib, params)
+
+
+def _errors(fl, st, clean):
+    """|disparity - the clean pair's SGBM disparity| of the valid matches where SGBM has one."""
+    ref = disparity_sgbm(clean.left, clean.right).astype(np.float64)
+    h, w = ref.shape
+    uv = fl.uv
+    d_ref = ref[np.clip(np.rint(uv[:, 1]).astype(int), 0, h - 1), np.clip(np.rint(uv[:, 0]).astype(int), 0, w - 1)]
+    s = st.valid & (d_ref > 0)
+    return np.abs((uv[s, 0] - st.u_right[s]) - d_ref[s])
+
+
+def test_off_by_default_and_in_no_config():
+    assert TrackingParams().subpixel_mean_on_fill is False
+    for name in ("kitti", "euroc", "synthetic"):
+        assert load_run_config(name).tracking.subpixel_mean_on_fill is False
+
+
+@pytest.mark.parametrize("frame_index", [10, 30])
+def test_hazy_pair_disparities_closer_to_the_clean_pair(frame_index):
+    src, clean, left, right = _pair(frame_index, 0.03)
+    off, on = _params(), _params(subpixel_mean_on_fill=True)
+    fl, base = _matches(off, left, right, src.calibration)
+    assert fill_active(fl, on, left)                     # the lighter haze opens the fill-in gate
+    fl2, mean = _matches(on, left, right, src.calibration)
+    np.testing.assert_array_equal(fl2.uv, fl.uv)         # the same keypoints, only the refinement differs
+    e_off, e_on = _errors(fl, base, clean), _errors(fl, mean, clean)
+    assert len(e_on) >= 0.95 * len(e_off)                # no fewer stereo points
+    assert np.mean(e_on > 1.0) < 0.8 * np.mean(e_off > 1.0)
+    assert np.median(e_on) < np.median(e_off)
+
+
+def test_clean_pair_keeps_its_matches():
+    src, _, left, right = _pair(20, 0.0)
+    off, on = _params(), _params(subpixel_mean_on_fill=True)
+    fl, base = _matches(off, left, right, src.calibration)
+    assert not fill_active(fl, on, left)
+    _, same = _matches(on, left, right, src.calibration)
+    np.testing.assert_array_equal(same.u_right, base.u_right)
+    np.testing.assert_array_equal(same.depth, base.depth)
