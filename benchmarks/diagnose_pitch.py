@@ -39,6 +39,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import bench_enhance_diagnose as bed  # noqa: E402
+from diagnose_drift import rotvec  # noqa: E402
 from canopy.backend import LocalMapper  # noqa: E402
 from canopy.config import parse_setting  # noqa: E402
 from canopy.frontend import Tracker  # noqa: E402
@@ -48,8 +49,7 @@ from canopy.frontend.pose import refine_pose  # noqa: E402
 
 def body_rot_err(T_est: np.ndarray, T_true: np.ndarray) -> np.ndarray:
     """Rotation vector (deg) of R_true^T R_est: the estimate's rotation error in its own camera frame."""
-    R = T_true[:3, :3].T @ T_est[:3, :3]
-    return np.degrees(cv2.Rodrigues(np.ascontiguousarray(R))[0].reshape(3))
+    return np.degrees(rotvec(T_true[:3, :3].T @ T_est[:3, :3]))
 
 
 class RecTracker(Tracker):

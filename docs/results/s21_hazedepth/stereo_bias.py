@@ -67,14 +67,12 @@ def equiangular_minimum(sad: np.ndarray, L: int):
 def exact_disparity(depth_png: Path, uv: np.ndarray, bf: float) -> np.ndarray:
     z = cv2.imread(str(depth_png), cv2.IMREAD_UNCHANGED).astype(np.float64) / 1000.0
     h, w = z.shape
-    zmin = -cv2.erode(-z, np.ones((5, 5)))  # max (dilate) of z
     zmax = cv2.dilate(z, np.ones((5, 5)))
     zlo = cv2.erode(z, np.ones((5, 5)))
     x = np.clip(np.rint(uv[:, 0]).astype(int), 0, w - 1)
     y = np.clip(np.rint(uv[:, 1]).astype(int), 0, h - 1)
     zz, lo, hi = z[y, x], zlo[y, x], zmax[y, x]
     ok = (zz > 0) & (lo > 0) & (hi < 1.03 * lo)
-    del zmin
     return np.where(ok, bf / np.maximum(zz, 1e-9), np.nan)
 
 
