@@ -8,10 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from shared.errors import ConfigError
-
-
-EXTRACTORS = ("opencv", "cells")  # TrackingParams.extractor / extractor_enhanced
+from canopy.frontend.params_checks import validate_tracking_params
 
 
 @dataclass(frozen=True)
@@ -378,120 +375,8 @@ class TrackingParams:
         return self.disparity_offset_cells_px if extractor == "cells" else self.disparity_offset_px
 
     def validate(self) -> "TrackingParams":
-        def need(ok: bool, name: str, what: str) -> None:
-            if not ok:
-                raise ConfigError("TrackingParams", f"{name} {what} (got {getattr(self, name)!r})")
-
-        need(self.n_features > 0, "n_features", "must be > 0")
-        need(self.opencv_threads >= 0, "opencv_threads", "must be >= 0 (0: OpenCV's default)")
-        need(0 <= self.switch_interval_ms <= 100, "switch_interval_ms", "must be in [0, 100] (0: Python's default)")
-        need(self.scale_factor > 1.0, "scale_factor", "must be > 1")
-        need(1 <= self.n_levels <= 16, "n_levels", "must be in [1, 16]")
-        need(0 < self.fast_threshold < 255, "fast_threshold", "must be in (0, 255)")
-        need(self.extractor in EXTRACTORS, "extractor", f"must be one of {EXTRACTORS}")
-        need(self.extractor_enhanced in EXTRACTORS, "extractor_enhanced", f"must be one of {EXTRACTORS}")
-        need(self.enhanced_cells_min_corners >= 0, "enhanced_cells_min_corners", "must be >= 0 (0: off)")
-        need(self.enhanced_cells_noise_factor >= 0, "enhanced_cells_noise_factor", "must be >= 0")
-        need(0 < self.enhanced_cells_corner_weight <= 1, "enhanced_cells_corner_weight", "must be in (0, 1]")
-        need(self.cell_size >= 8, "cell_size", "must be >= 8 px")
-        need(self.cell_ranking in ("harris2x", "fast", "harris"), "cell_ranking", "must be harris2x, fast or harris")
-        need(0 < self.fast_fallback_threshold < 255, "fast_fallback_threshold", "must be in (0, 255)")
-        need(self.cell_fallback_noise_factor >= 0, "cell_fallback_noise_factor", "must be >= 0")
-        need(self.cell_fallback_noisy_sigma >= 0, "cell_fallback_noisy_sigma", "must be >= 0 (0: off)")
-        need(self.cell_fallback_noise_factor_noisy >= 0, "cell_fallback_noise_factor_noisy", "must be >= 0")
-        need(self.cell_fallback_noisy_min_texture >= 0, "cell_fallback_noisy_min_texture", "must be >= 0 (0: no test)")
-        need(self.stereo_fill_min_sigma >= 0, "stereo_fill_min_sigma", "must be >= 0")
-        need(self.stereo_fill_max_sigma >= 0, "stereo_fill_max_sigma", "must be >= 0 (0: no upper bound)")
-        need(self.stereo_fill_max_texture >= 0, "stereo_fill_max_texture", "must be >= 0 (0: no test)")
-        need(self.stereo_fill_enhanced_min_sensor_sigma >= 0, "stereo_fill_enhanced_min_sensor_sigma", "must be >= 0 (0: off)")
-        need(self.stereo_fill_enhanced_max_sensor_sigma >= 0, "stereo_fill_enhanced_max_sensor_sigma",
-             "must be >= 0 (0: no upper bound)")
-        need(self.noisy_extractor_max_texture >= 0, "noisy_extractor_max_texture", "must be >= 0 (0: no test)")
-        need(self.noisy_extractor_max_texture == 0 or self.noisy_extractor_robust, "noisy_extractor_max_texture",
-             "needs noisy_extractor_robust: true (the excess is mean - robust sigma)")
-        need(self.grid_cols > 0 and self.grid_rows > 0, "grid_cols", "and grid_rows must be > 0")
-        need(self.oversample >= 1.0, "oversample", "must be >= 1")
-        need(0 <= self.stereo_max_hamming <= 256, "stereo_max_hamming", "must be in [0, 256]")
-        need(0 < self.stereo_ratio <= 1, "stereo_ratio", "must be in (0, 1]")
-        need(self.stereo_matcher in ("descriptor", "flow"), "stereo_matcher", "must be 'descriptor' or 'flow'")
-        need(self.flow_window >= 3 and self.flow_window % 2 == 1, "flow_window", "must be odd and >= 3")
-        need(0 <= self.flow_levels <= 8, "flow_levels", "must be in [0, 8]")
-        need(self.flow_iterations >= 1, "flow_iterations", "must be >= 1")
-        need(self.flow_min_eig > 0, "flow_min_eig", "must be > 0")
-        need(self.flow_max_dy > 0, "flow_max_dy", "must be > 0")
-        need(self.flow_back_px >= 0, "flow_back_px", "must be >= 0 (0: no back-track)")
-        need(0 <= self.flow_back_levels <= 8, "flow_back_levels", "must be in [0, 8]")
-        need(self.min_disparity > 0, "min_disparity", "must be > 0")
-        need(0 < self.max_disparity_fraction <= 1, "max_disparity_fraction", "must be in (0, 1]")
-        need(self.row_tolerance >= 0, "row_tolerance", "must be >= 0")
-        need(self.subpixel_window >= 1, "subpixel_window", "must be >= 1")
-        need(self.sad_outlier_factor_noisy > 0, "sad_outlier_factor_noisy",
-             "must be > 0 (at or above sad_outlier_factor: off)")
-        need(0 <= self.sad_snr_low < self.sad_snr_high, "sad_snr_low", "must be >= 0 and < sad_snr_high")
-        need(self.subpixel_search >= 1, "subpixel_search", "must be >= 1")
-        need(self.subpixel_normalise in ("centre", "mean"), "subpixel_normalise", "must be 'centre' or 'mean'")
-        need(self.subpixel_denoise_sigma >= 0, "subpixel_denoise_sigma", "must be >= 0 (0: off)")
-        need(self.subpixel_denoise_blur >= 0, "subpixel_denoise_blur", "must be >= 0 (0: guided filter)")
-        need(abs(self.disparity_offset_px) < 5, "disparity_offset_px", "must be within +-5 px")
-        need(abs(self.disparity_offset_cells_px) < 5, "disparity_offset_cells_px", "must be within +-5 px")
-        need(self.search_radius > 0, "search_radius", "must be > 0")
-        need(self.search_radius_wide >= self.search_radius, "search_radius_wide", "must be >= search_radius")
-        need(self.search_radius_local > 0, "search_radius_local", "must be > 0")
-        need(0 < self.map_ratio <= 1, "map_ratio", "must be in (0, 1]")
-        need(self.max_depth_baselines > 0, "max_depth_baselines", "must be > 0")
-        need(self.close_depth_baselines > 0, "close_depth_baselines", "must be > 0")
-        need(self.stereo_obs_max_depth_baselines >= 0, "stereo_obs_max_depth_baselines", "must be >= 0 (0: no limit)")
-        need(self.contour_window_px >= 1, "contour_window_px", "must be >= 1 px")
-        need(self.contour_ratio > 0, "contour_ratio", "must be > 0")
-        need(self.contour_downscale in (1, 2, 4), "contour_downscale", "must be 1, 2 or 4")
-        need(self.contour_max_disparity_px > 0, "contour_max_disparity_px", "must be > 0")
-        need(0.0 <= self.contour_min_matched_fraction <= 1.0, "contour_min_matched_fraction", "must be in [0, 1]")
-        need(self.contour_unmatched_min_radius >= 0, "contour_unmatched_min_radius", "must be >= 0")
-        need(0.0 < self.contour_max_flagged_fraction <= 1.0, "contour_max_flagged_fraction", "must be in (0, 1]")
-        need(self.contour_min_rotation_deg >= 0, "contour_min_rotation_deg", "must be >= 0 degrees")
-        need(self.pnp_reprojection_error > 0, "pnp_reprojection_error", "must be > 0")
-        need(self.pnp_iterations > 0, "pnp_iterations", "must be > 0")
-        need(0 < self.pnp_confidence < 1, "pnp_confidence", "must be in (0, 1)")
-        need(self.min_inliers >= 6, "min_inliers", "must be >= 6 (a pose has 6 DoF)")
-        need(0 <= self.min_inlier_fraction < 1, "min_inlier_fraction", "must be in [0, 1)")
-        need(self.max_motion_deviation_m > 0, "max_motion_deviation_m", "must be > 0")
-        need(self.max_motion_deviation_deg > 0, "max_motion_deviation_deg", "must be > 0")
-        need(self.ransac_max_deviation_deg >= 0, "ransac_max_deviation_deg", "must be >= 0 (0: off)")
-        need(self.ransac_max_deviation_m >= 0, "ransac_max_deviation_m", "must be >= 0 (0: off)")
-        need(self.motion_prior_sigma_deg >= 0, "motion_prior_sigma_deg", "must be >= 0 (0: off)")
-        need(self.motion_prior_sigma_m >= 0, "motion_prior_sigma_m", "must be >= 0 (0: off)")
-        need(self.motion_prior_min_rot_std_deg >= 0, "motion_prior_min_rot_std_deg", "must be >= 0 (0: always)")
-        need(self.motion_prior_pose_var_factor >= 0, "motion_prior_pose_var_factor", "must be >= 0 (0: off)")
-        need(self.max_predicted_frames >= 0, "max_predicted_frames", "must be >= 0")
-        need(self.fast_noise_factor >= 0, "fast_noise_factor", "must be >= 0")
-        need(self.pixel_sigma > 0, "pixel_sigma", "must be > 0")
-        need(self.pose_opt_rounds >= 1, "pose_opt_rounds", "must be >= 1")
-        need(self.pose_opt_iterations >= 1, "pose_opt_iterations", "must be >= 1")
-        need(self.chi2_mono > 0 and self.chi2_stereo > 0, "chi2_mono", "and chi2_stereo must be > 0")
-        need(0 < self.entropy_ratio_alpha < 1, "entropy_ratio_alpha", "must be in (0, 1)")
-        need(self.min_frames_between_keyframes >= 0, "min_frames_between_keyframes", "must be >= 0")
-        need(self.max_frames_between_keyframes > self.min_frames_between_keyframes,
-             "max_frames_between_keyframes", "must exceed min_frames_between_keyframes")
-        need(0 < self.min_tracked_fraction <= 1, "min_tracked_fraction", "must be in (0, 1]")
-        need(self.relocalise_bridge_frames >= 0, "relocalise_bridge_frames", "must be >= 0")
-        need(self.min_init_points >= self.min_inliers, "min_init_points", "must be >= min_inliers")
-        need(self.line_detector in ("fld", "lsd"), "line_detector", "must be 'fld' or 'lsd'")
-        need(self.line_max_lines > 0, "line_max_lines", "must be > 0")
-        need(0.25 <= self.line_image_scale <= 1.0, "line_image_scale", "must be in [0.25, 1]")
-        need(0 < self.line_min_length_fraction < 1, "line_min_length_fraction", "must be in (0, 1)")
-        need(0 < self.line_search_radius <= self.line_search_radius_wide, "line_search_radius",
-             "must be in (0, line_search_radius_wide]")
-        need(0 < self.line_max_angle_deg < 90, "line_max_angle_deg", "must be in (0, 90)")
-        need(0 <= self.line_max_hamming <= 256, "line_max_hamming", "must be in [0, 256]")
-        need(0 < self.line_ratio <= 1, "line_ratio", "must be in (0, 1]")
-        need(self.line_sigma > 0 and self.chi2_line > 0, "line_sigma", "and chi2_line must be > 0")
-        need(self.line_max_depth_baselines > 0, "line_max_depth_baselines", "must be > 0")
-        need(self.line_weight_in_count >= 0, "line_weight_in_count", "must be >= 0")
-        need(self.noisy_extractor_sigma >= 0, "noisy_extractor_sigma", "must be >= 0 (0: off)")
-        need(self.noisy_extractor_n_features >= 0, "noisy_extractor_n_features", "must be >= 0 (0: n_features)")
-        need(self.uncertain_stereo_max_rel_sigma >= 0, "uncertain_stereo_max_rel_sigma", "must be >= 0 (0: off)")
-        need(self.uncertain_stereo_min_noise >= 0, "uncertain_stereo_min_noise", "must be >= 0")
-        return self
+        """Range-check every field (canopy.frontend.params_checks); raise ConfigError naming the field."""
+        return validate_tracking_params(self)
 
     def __post_init__(self):
         self.validate()
