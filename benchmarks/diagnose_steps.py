@@ -20,6 +20,7 @@ final pose's departure from the prediction in those sigmas (``k_z``).
     CANOPY_CACHE_DIR=/work/cache PYTHONPATH=$PWD python benchmarks/diagnose_steps.py \\
         --cells-cache /tmp/stepcheck-cache --gains 1 0.15 0.06 --betas 0 0.06 --noise low high --seeds 0 1 2 \\
         [--min-err 0.1] [--set tracking.name=value ...] [--out steps.json]
+    python benchmarks/diagnose_steps.py --compare base.json on.json   # ATE per cell and draw, side by side
 """
 from __future__ import annotations
 
@@ -76,7 +77,26 @@ class _Probe:
         tracker._ransac, tracker._start_from_prediction, tracker._refine = _ransac, _start, _refine
 
     def reset(self):
-        self.ransac, self.from_pred, self.refines = None, False, []
+        self.ransac, self.from_pred, self.refines, self.step = None, False, [], ""
+
+
+def _probe_step_check(probes: dict):
+    """Record what ``step_check.recheck_step`` did on the frame (``step``: "" not asked, "kept" the
+    first solution, "replaced" by the solve from the prediction)."""
+    import canopy.frontend.tracker as tracker_module
+    from canopy.frontend.step_check import recheck_step, step_departs
+
+    def _recheck(tracker, first, T_pred_cw, *a, **k):
+        out = recheck_step(tracker, first, T_pred_cw, *a, **k)
+        if first[0] is not None and step_departs(first[0].T_cam_world, T_pred_cw, tracker.params.step_max_deviation_m):
+            probes[id(tracker)].step = "kept" if out is first else "replaced"
+        return out
+
+    tracker_module.recheck_step = _recheck
+
+
+_PROBES: dict = {}
+_probe_step_check(_PROBES)
 
 
 def _step_error(T_prev_wc, T_wc, dg):
@@ -96,6 +116,7 @@ def run_cell(path: Path, clean_path, dataset: str, track_sets: dict) -> tuple[di
     enhancer = make_enhancer(enh)
     tracker = Tracker(src.calibration, tp)
     probe = _Probe(tracker)
+    _PROBES[id(tracker)] = probe
     mapper = LocalMapper(src.calibration, cfg.mapping)
     schedule = MapUpdateSchedule(effective_map_update_lag(cfg.runtime.map_update_lag_frames, tp, cfg.runtime.sensor))
     gt = clean.ground_truth.poses
@@ -112,7 +133,7 @@ def run_cell(path: Path, clean_path, dataset: str, track_sets: dict) -> tuple[di
         probe.reset()
         res = tracker.track(StereoFrame(fr.index, fr.timestamp, le, re), **kw, sensor_sigma=info["noise_sigma"])
         row = {"i": i, "status": res.status, "inl": int(res.n_inliers), "matches": int(res.n_matches),
-               "from_pred": probe.from_pred}
+               "from_pred": probe.from_pred, "step": probe.step}
         if T_prev is not None and i > 0 and probe.refines:
             dg = se3_inv(gt[i - 1]) @ gt[i]
             row["gt_step"] = float(np.linalg.norm(dg[:3, 3]))
@@ -156,14 +177,35 @@ def run_cell(path: Path, clean_path, dataset: str, track_sets: dict) -> tuple[di
 
 
 def _fmt(row: dict) -> str:
-    keys = ["i", "status", "from_pred", "inl", "matches", "gt_step", "err", "err_z", "pred_err", "ransac_err",
+    keys = ["i", "status", "from_pred", "step", "inl", "matches", "gt_step", "err", "err_z", "pred_err", "ransac_err",
             "ransac_err_z", "ransac_dev_m", "ransac_dev_deg", "dev_pred", "sd_z", "k_z", "z_med", "z10", "z90", "n_far", "oct_mean"]
     return " ".join(f"{k}={row[k]:.3f}" if isinstance(row.get(k), float) else f"{k}={row.get(k)}"
                     for k in keys if k in row)
 
 
+def compare(paths: list[str]) -> None:
+    """Per cell, the ATE (mm) of every draw in each ``--out`` file, the median, and the bad steps."""
+    runs = [json.loads(Path(f).read_text()) for f in paths]
+    cells = sorted({name.rsplit("-seed", 1)[0] for run in runs for name in run})
+    for cell in cells:
+        cols = []
+        for run in runs:
+            draws = sorted((int(n.rsplit("-seed", 1)[1]), v) for n, v in run.items() if n.rsplit("-seed", 1)[0] == cell)
+            ates = [v["summary"].get("ate", np.nan) * 1e3 for _, v in draws]
+            tracked = [v["summary"]["tracked"] for _, v in draws]
+            bad = [sum(r.get("err", 0.0) > 0.1 for r in v["rows"]) for _, v in draws]
+            fired = [sum(r.get("step") == "replaced" for r in v["rows"]) for _, v in draws]
+            lost = "" if min(tracked, default=1.0) == 1.0 else " tracked " + "/".join(f"{t:.2f}" for t in tracked)
+            cols.append(" / ".join(f"{a:.1f}" for a in ates) + f" (med {np.median(ates):.1f}; >0.1 m steps "
+                        + "/".join(map(str, bad)) + "; replaced " + "/".join(map(str, fired)) + lost + ")")
+        print(f"{cell:18s} | " + " | ".join(cols))
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    if len(sys.argv) > 1 and sys.argv[1] == "--compare":  # --compare A.json B.json ...
+        compare(sys.argv[2:])
+        return 0
     ap.add_argument("--dataset", default="kitti")
     ap.add_argument("--cells-cache", required=True)
     ap.add_argument("--gains", type=float, nargs="+", default=[1.0])
@@ -188,7 +230,7 @@ def main() -> int:
             print(f"== {name}: tracked {out['tracked']:.3f} ATE {out.get('ate', np.nan) * 1e3:.1f} mm, "
                   f"step error median {np.median(errs) * 1e3:.1f} mm max {np.max(errs) * 1e3:.1f} mm", flush=True)
             for r in rows:
-                if r.get("err", 0.0) > args.min_err:
+                if r.get("err", 0.0) > args.min_err or r.get("step"):
                     print("   ", _fmt(r), flush=True)
             allrows[name] = {"summary": out, "rows": rows}
     if args.out:
