@@ -246,6 +246,14 @@ class TrackingParams:
     # 40-80 noisy matches picks yaw-plus-sideways poses 4-6 deg / 1 m off (docs/notes/s14-darkhaze.md).
     ransac_max_deviation_deg: float = 0.0
     ransac_max_deviation_m: float = 0.0
+    # > 0: a refined pose whose camera centre lies more than this (m) from the constant-velocity
+    # prediction is solved once more from the prediction (refined on the stage-1 matches it explains,
+    # then the local-map search); when that lands in another minimum (centres > half this apart) with
+    # more local-map inliers it replaces the first (canopy.frontend.step_check; without line features,
+    # on frames after a tracked one). The small local-map window confirms a wrong start: KITTI
+    # g1-b0.06-low seed 2 frame 29 ends 0.32 m short with as many inliers as its neighbours, ATE
+    # 168.8 mm (seeds 0 / 1: 38.1 / 32.9); 41.0 mm with 0.2 (docs/notes/s22-stepcheck.md).
+    step_max_deviation_m: float = 0.0
     # > 0: motion-only refinement adds a prior pulling the pose toward the constant-velocity
     # prediction with these standard deviations per axis (degrees / metres of the camera frame;
     # canopy.frontend.pose.MotionPrior), on frames whose motion model has seen two tracked frames.

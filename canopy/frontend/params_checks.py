@@ -97,6 +97,7 @@ def validate_tracking_params(p: "TrackingParams") -> "TrackingParams":
     need(p.max_motion_deviation_deg > 0, "max_motion_deviation_deg", "must be > 0")
     need(p.ransac_max_deviation_deg >= 0, "ransac_max_deviation_deg", "must be >= 0 (0: off)")
     need(p.ransac_max_deviation_m >= 0, "ransac_max_deviation_m", "must be >= 0 (0: off)")
+    need(p.step_max_deviation_m >= 0, "step_max_deviation_m", "must be >= 0 (0: off)")
     need(p.motion_prior_sigma_deg >= 0, "motion_prior_sigma_deg", "must be >= 0 (0: off)")
     need(p.motion_prior_sigma_m >= 0, "motion_prior_sigma_m", "must be >= 0 (0: off)")
     need(p.motion_prior_min_rot_std_deg >= 0, "motion_prior_min_rot_std_deg", "must be >= 0 (0: always)")

@@ -45,6 +45,7 @@ from canopy.frontend.messages import TrackingResult
 from canopy.frontend.params import TrackingParams
 from canopy.frontend.pose import MotionPrior
 from canopy.frontend.stereo import StereoMatches
+from canopy.frontend.step_check import local_map_pose, recheck_step
 from canopy.frontend.track_health import LOST_TOO_FEW_MATCHES, image_noise_sigma, judge_pose
 from canopy.frontend.tracker_lines import TrackerLinesMixin
 from canopy.frontend.tracker_measurements import TrackerMeasurementsMixin
@@ -329,21 +330,14 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
                 est = self._refine(T_cw, X, r, feats, stereo, inliers=inliers, line_obs=line_obs)
                 T_cw = est.T_cam_world
                 est = None
-            # stage 2 (TrackLocalMap): all local-map points through the RANSAC pose, small window
-            sub = np.flatnonzero(self._in_frustum(se3_inv(T_cw), view.ids, view.pos))
-            q2, r2, in_view = self._search(T_cw, view.pos[sub], view.words[sub], feats, kp_words,
-                                           p.search_radius_local, scaled=True)
-            q2 = sub[q2]
-            visible_ids = view.ids[sub[in_view]]
-            stereo = self._stereo(stereo, timings)  # the worker's matches: needed from here on
-            if len(q2) + n_lines >= p.min_inliers:
-                est = self._refine(T_cw, view.pos[q2], r2, feats, stereo, line_obs=line_obs)
-                if self._n_support(est) >= p.min_inliers:
-                    X, r, ids, words = view.pos[q2], r2, view.ids[q2], view.words[q2]
-                else:
-                    est = None
-            if est is None:
-                est = self._refine(T_cw, X, r, feats, stereo, inliers=inliers, line_obs=line_obs)
+            # stage 2 (TrackLocalMap): all local-map points through the RANSAC pose, small window;
+            # the worker's stereo matches are waited for after the search (canopy.frontend.step_check)
+            stereo_of, stage1 = (lambda: self._stereo(stereo, timings)), (X, r, ids, words)
+            solved = local_map_pose(self, T_cw, view, feats, kp_words, stereo_of, stage1, inliers, line_obs, n_lines)
+            if (p.step_max_deviation_m > 0 and lview is None and not from_prediction and self._velocity_valid
+                    and self._n_failed == 0 and self._lost_streak == 0):  # a step the motion model cannot explain
+                solved = recheck_step(self, solved, T_pred_cw, view, feats, kp_words, stereo_of, stage1, inliers)
+            est, (X, r, ids, words), visible_ids = solved
         stereo = self._stereo(stereo, timings)
         _stage(timings, "track_local_map", t0)  # includes the wait for the worker's stereo (its own stage)
         n_matches = len(r)
