@@ -19,6 +19,7 @@ reduction in image sequences using motion-compensated temporal filtering", IEEE 
 
 Modes:
     --filter W,K,F[,PRESET] --cell C --out O [--run]   filter both cameras of a cell, track it in process
+                                                        (PRESET ultrafast / fast / medium, or exact: the oracle's warp)
     --flow-accuracy --cell C                            DIS end-point error against the exact warp
     --cpu --cell C                                      CPU per pair (time.thread_time)
 """
@@ -75,7 +76,9 @@ class TemporalFilter:
         h, w = grey.shape
         return cv2.resize(grey[: h - h % f, : w - w % f], (w // f, h // f), interpolation=cv2.INTER_AREA)
 
-    def filter(self, grey: np.ndarray, sigma: float) -> np.ndarray:
+    def filter(self, grey: np.ndarray, sigma: float, flow: np.ndarray | None = None) -> np.ndarray:
+        """``flow``: a full-resolution flow (H, W, 2) to use instead of DIS's, NaN where the past is not seen
+        (the exact warp of the oracle: separates the flow's error from the filter's)."""
         if grey.ndim != 2 or grey.dtype != np.uint8:
             raise ValueError("TemporalFilter: an 8-bit grey image is required")
         small = self._small(grey)
@@ -85,7 +88,10 @@ class TemporalFilter:
             return grey
         h, w = grey.shape
         f = self.downsample
-        flow = self._flow.calc(small, self._prev_small, None)  # I_t(x) ≈ I_{t−1}(x + flow(x))
+        if flow is None:
+            flow = self._flow.calc(small, self._prev_small, None)  # I_t(x) ≈ I_{t−1}(x + flow(x))
+        elif f > 1:
+            f = 1  # given at full resolution
         if f > 1:
             flow = cv2.resize(flow, (w, h), interpolation=cv2.INTER_LINEAR) * float(f)
         if self._grid is None or self._grid[0].shape != (h, w):
@@ -103,22 +109,46 @@ class TemporalFilter:
         return np.clip(np.rint(out), 0, 255).astype(np.uint8)
 
 
+def exact_flows(cell: Path):
+    """Per camera, frame t -> the exact flow from t to t−1 (``oracle_temporal.warp_maps``), NaN where occluded."""
+    from canopy.degrade import depth_from_rendered
+    src = open_source("euroc", cell)
+    c = src.calibration
+    K = np.array([[c.fx, 0, c.cx], [0, c.fy, c.cy], [0, 0, 1.0]])
+    gt, depth_l = src.ground_truth.poses, load_depth(cell)
+    depth_r = [depth_from_rendered(d, c, view="right") for d in depth_l]
+    T_lr = np.eye(4)
+    T_lr[0, 3] = c.baseline
+    gx, gy = np.meshgrid(np.arange(c.width, dtype=np.float32), np.arange(c.height, dtype=np.float32))
+
+    def flow(cam: int, t: int):
+        depth, T_c = (depth_l, np.eye(4)) if cam == 0 else (depth_r, T_lr)
+        mx, my, ok = warp_maps(depth[t], depth[t - 1], se3_inv(gt[t - 1] @ T_c) @ gt[t] @ T_c, K, 0.03)
+        fl = np.dstack([mx - gx, my - gy]).astype(np.float32)
+        fl[~ok] = np.nan
+        return fl
+    return flow
+
+
 def filter_folder(cell: Path, out: Path, weight: float, k: float, downsample: int, preset: str = "ultrafast") -> dict:
-    """The filter on every frame of both cameras of ``cell``, written as a new sequence folder ``out``."""
+    """The filter on every frame of both cameras of ``cell``, written as a new sequence folder ``out``;
+    ``preset`` "exact": the oracle's exact flow instead of DIS."""
     if out.exists():
         shutil.rmtree(out)
     shutil.copytree(cell, out, ignore=shutil.ignore_patterns("*.png"))
     shutil.copytree(cell / "mav0" / "depth0" / "data", out / "mav0" / "depth0" / "data", dirs_exist_ok=True)
     f0 = sorted((cell / "mav0" / "cam0" / "data").iterdir())
     f1 = sorted((cell / "mav0" / "cam1" / "data").iterdir())
-    filters = [TemporalFilter(weight, k, downsample, preset=preset) for _ in range(2)]
+    exact = exact_flows(cell) if preset == "exact" else None
+    filters = [TemporalFilter(weight, k, downsample, preset="ultrafast" if exact else preset) for _ in range(2)]
     sig = []
-    for a, b in zip(f0, f1):
+    for t, (a, b) in enumerate(zip(f0, f1)):
         left, right = cv2.imread(str(a), cv2.IMREAD_UNCHANGED), cv2.imread(str(b), cv2.IMREAD_UNCHANGED)
         sigma = estimate_noise(left, rows_fraction=0.5)
         sig.append(sigma)
-        cv2.imwrite(str(out / "mav0" / "cam0" / "data" / a.name), filters[0].filter(left, sigma))
-        cv2.imwrite(str(out / "mav0" / "cam1" / "data" / b.name), filters[1].filter(right, sigma))
+        fl = (exact(0, t), exact(1, t)) if exact and t > 0 else (None, None)
+        cv2.imwrite(str(out / "mav0" / "cam0" / "data" / a.name), filters[0].filter(left, sigma, fl[0]))
+        cv2.imwrite(str(out / "mav0" / "cam1" / "data" / b.name), filters[1].filter(right, sigma, fl[1]))
     return {"frames": len(f0), "raw_sigma_p50": float(np.median(sig))}
 
 
