@@ -123,7 +123,7 @@ def main() -> int:
             ur, _, good = subpixel_refine(c.left, c.right, uv, st.u_right[ok].astype(np.float64), left.octave[ok], sf,
                                           params.subpixel_window, params.subpixel_search, params.subpixel_normalise)
             d_ref = np.where(good, uv[:, 0] - (ur - params.disparity_offset_for(left.extractor)), np.nan)
-        recs.append(np.column_stack([np.full(len(ok), idx), left.octave[ok], d_est, d_ref, calib.bf / d_est]))
+        recs.append(np.column_stack([np.full(len(ok), idx), left.octave[ok], d_est, d_ref, calib.bf / d_est, uv]))
     A = np.concatenate(recs)
     fin = np.isfinite(A[:, 3]) & (A[:, 3] > 0)
     A = A[fin]
@@ -153,7 +153,7 @@ def main() -> int:
     frac = A[:, 2] - np.floor(A[:, 2])
     hist = np.histogram(frac, bins=10, range=(0, 1))[0]
     print("fractional part of the estimated disparity (pixel locking shows as peaks at 0 / 1):", hist.tolist())
-    if args.out:
+    if args.out:  # columns: frame, octave, disparity, reference disparity, depth, u, v
         np.save(args.out, A)
     return 0
 
