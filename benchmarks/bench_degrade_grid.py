@@ -163,10 +163,11 @@ def pair_preprocess():
 
 
 def cell_haze_depth(haze_depth: str, dataset: str, kind: str, clean_path: Path) -> str:
-    """``stereo`` or ``rendered`` for ``dataset``'s hazy cells: ``--haze-depth`` applies to the generated
-    presets; KITTI / EuRoC (real images, no rendered depth) always use SGBM."""
-    if dataset not in PRESETS:
-        return "stereo"
+    """``stereo``, ``stereo-sky`` or ``rendered`` for ``dataset``'s hazy cells: ``--haze-depth`` applies to
+    the generated presets; KITTI / EuRoC (real images, no rendered depth) use the tool's SGBM default
+    (``resolve_haze_depth``: ``stereo-sky`` on KITTI, ``stereo`` on EuRoC) unless an SGBM depth is forced."""
+    if dataset not in PRESETS:  # an SGBM depth can be forced; rendered cannot
+        return resolve_haze_depth(haze_depth if haze_depth in ("stereo", "stereo-sky") else "auto", kind, clean_path)
     return resolve_haze_depth(haze_depth, kind, clean_path)
 
 
@@ -179,12 +180,14 @@ def degraded_cell(kind: str, dataset: str, clean_path: Path, cell, max_frames, w
     cells from the rendered depth, ``-rendered``) and reused by later runs of this benchmark (e.g. the
     ``none`` / ORB-SLAM3-raw columns and the ``auto`` columns run apart), instead of being written again
     and deleted; a cached copy whose DEGRADED.yaml names another haze depth is an error, not reused."""
-    if haze_depth not in ("stereo", "rendered"):
-        raise ValueError(f"degraded_cell: haze_depth must be resolved to stereo or rendered, got {haze_depth!r}")
+    if haze_depth not in ("stereo", "stereo-sky", "rendered"):
+        raise ValueError(f"degraded_cell: haze_depth must be resolved to stereo, stereo-sky or rendered, "
+                         f"got {haze_depth!r}")
     if cells_cache is None:
         return degrade_sequence(kind, workdir / f"{dataset}_{cell.label}", cell, path=clean_path,
                                 max_frames=max_frames, haze_depth=haze_depth), True
-    rendered = "-rendered" if haze_depth == "rendered" and cell.haze else ""  # never mixed up with SGBM-haze copies
+    # never mixed up with (old) SGBM-haze copies: the haze depth other than plain stereo names the copy
+    rendered = f"-{haze_depth}" if haze_depth != "stereo" and cell.haze else ""
     out = cells_cache / f"{dataset}-{max_frames or 'all'}-{cell.label}-seed{cell.seed}{rendered}"
     record = out / "DEGRADED.yaml"
     if not record.is_file():
@@ -362,7 +365,8 @@ def main(argv=None) -> int:
                     help="haze depth of the generated presets' cells: the renderer's exact depth (auto, the "
                          "default, = rendered for the presets), or SGBM on the clean pair (stereo: the grid "
                          "before s9; its haze texture differs between the cameras, docs/notes/s8-haze.md); "
-                         "KITTI / EuRoC always use SGBM")
+                         "KITTI / EuRoC use SGBM: the tool's default (stereo-sky on KITTI, stereo on EuRoC) "
+                         "unless stereo or stereo-sky is forced (stereo: KITTI's cells before s22)")
     ap.add_argument("--skip-clean", action="store_true",
                     help="run the degraded cells only (e.g. re-running the hazy column): the criteria then need "
                          "the clean rows of an earlier run, merged in with --merge")

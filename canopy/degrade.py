@@ -263,8 +263,11 @@ def _grey(image: np.ndarray) -> np.ndarray:
 
 
 def disparity_sgbm(left: np.ndarray, right: np.ndarray, num_disparities: int = 128,
-                   block_size: int = 5) -> np.ndarray:
-    """Left-view disparity (float32 px) of a rectified pair by SGBM; invalid pixels are ≤ 0."""
+                   block_size: int = 5, paths: int = 5) -> np.ndarray:
+    """Left-view disparity (float32 px) of a rectified pair by SGBM; invalid pixels are ≤ 0.
+
+    ``paths``: 5 (OpenCV's 3-way mode) or 8 (``MODE_HH``, Hirschmüller's full 8 paths: less streaking
+    along rows in low texture, the haze depth of ``depth_for_haze``)."""
     left, right = _check_image(left, "left"), _check_image(right, "right")
     if left.shape[:2] != right.shape[:2]:
         raise InputError("right", f"right image is {right.shape[:2]} but left is {left.shape[:2]}")
@@ -274,7 +277,7 @@ def disparity_sgbm(left: np.ndarray, right: np.ndarray, num_disparities: int = 1
         minDisparity=0, numDisparities=int(num_disparities), blockSize=int(block_size),
         P1=8 * channels * block_size ** 2, P2=32 * channels * block_size ** 2,  # OpenCV's recommended smoothness
         disp12MaxDiff=1, uniquenessRatio=10, speckleWindowSize=100, speckleRange=2,
-        mode=cv2.STEREO_SGBM_MODE_SGBM_3WAY)
+        mode=cv2.STEREO_SGBM_MODE_HH if paths == 8 else cv2.STEREO_SGBM_MODE_SGBM_3WAY)
     raw = sgbm.compute(_grey(left), _grey(right))  # int16, disparity × 16
     return raw.astype(np.float32) / 16.0
 
@@ -357,6 +360,78 @@ def fill_disparity_background(disp: np.ndarray) -> np.ndarray:
     d_r = np.where(has_r, disp[rows, np.clip(right, 0, w - 1)], np.inf)
     filled = np.minimum(d_l, d_r)
     return np.where(valid, disp, np.where(np.isfinite(filled), filled, 0.0)).astype(np.float32)
+
+
+def texture_mask(image: np.ndarray, min_std: float, window: int = 7) -> np.ndarray:
+    """Pixels whose ``window``² neighbourhood has a grey-level std ≥ ``min_std``: where SGBM's disparity
+    is a measurement and not the smoothness term's guess (textureless sky, flat airlight)."""
+    f = _grey(image).astype(np.float32)
+    m, m2 = cv2.blur(f, (window, window)), cv2.blur(f * f, (window, window))
+    return np.sqrt(np.maximum(m2 - m * m, 0.0)) >= float(min_std)
+
+
+def _nearest_valid(disp: np.ndarray, valid: np.ndarray, axis: int):
+    """Per pixel, the disparity of the nearest valid pixel before and after it along ``axis`` (inf if
+    none), and whether one exists before it."""
+    n = disp.shape[axis]
+    idx = np.broadcast_to(np.arange(n).reshape((-1, 1) if axis == 0 else (1, -1)), disp.shape)
+    before = np.maximum.accumulate(np.where(valid, idx, -1), axis=axis)
+    after = np.flip(np.minimum.accumulate(np.flip(np.where(valid, idx, n), axis), axis=axis), axis)
+    take = lambda i: np.take_along_axis(disp, np.clip(i, 0, n - 1), axis)  # noqa: E731
+    return np.where(before >= 0, take(before), np.inf), np.where(after < n, take(after), np.inf), before >= 0
+
+
+def fill_disparity_sky(disp: np.ndarray) -> np.ndarray:
+    """Fill invalid (≤ 0) disparities with the smallest (farthest) of the nearest valid ones in the
+    row *and* the column; a hole with no valid pixel above it in a column that has one is sky (0:
+    far). The KITTI devkit's background rule (``fill_disparity_background``) in two dimensions: a
+    strip under a tree's crown between two trunks is bounded by near surfaces in its row but by the
+    far ground below. The sky rule assumes an upright outdoor camera (KITTI), not a room (EuRoC).
+    Columns without any valid pixel (SGBM's left border strip) take the row rule alone."""
+    disp = np.asarray(disp, dtype=np.float32)
+    valid = disp > 0
+    left, right, _ = _nearest_valid(disp, valid, 1)
+    up, down, has_up = _nearest_valid(disp, valid, 0)
+    col_any = valid.any(axis=0)[None, :]
+    up, down = np.where(col_any, up, np.inf), np.where(col_any, down, np.inf)
+    filled = np.minimum(np.minimum(left, right), np.minimum(up, down))
+    filled = np.where(np.isfinite(filled), filled, 0.0)
+    sky = ~has_up & col_any
+    return np.where(valid, disp, np.where(sky, 0.0, filled)).astype(np.float32)
+
+
+# Texture (grey-level std in 7x7) below which SGBM's disparity is not kept for the haze depth. Chosen
+# on the generated presets' exact-depth haze (benchmarks/haze_depth_error.py; docs/notes/s22-hazepaint.md):
+# 1.5 gave the smallest painted-haze error near depth edges (3, which also clears KITTI's noisy sky,
+# costs the presets' dark ground).
+HAZE_MIN_TEXTURE = 1.5
+
+
+def depth_for_haze(left: np.ndarray, right: np.ndarray, calib: StereoCalibration, max_depth: float = 200.0,
+                   num_disparities: int = 128, block_size: int = 5, view: str = "left",
+                   min_texture: float = HAZE_MIN_TEXTURE) -> np.ndarray:
+    """Z-depth (float32 m) for painting haze on a real outdoor pair (``--haze-depth stereo-sky``).
+
+    ``depth_from_stereo`` keeps every SGBM disparity and fills holes along rows. On the generated
+    presets, against the haze painted from the renderer's exact depth, that paints far surfaces and
+    sky with near depth (too little airlight: −23 to −82 grey levels on average beyond 40 m at β 0.06):
+    SGBM "measures" textureless sky by its smoothness term, and row fills under tree crowns take the
+    trunks' depth. Here: SGBM with 8 paths, disparities kept only where the image has texture
+    (``texture_mask``), holes filled by ``fill_disparity_sky``; beyond ``max_depth`` is ``max_depth``.
+    """
+    _check_sgbm(max_depth, num_disparities, block_size)
+    if view == "left":
+        ref, disp = left, disparity_sgbm(left, right, num_disparities, block_size, paths=8)
+    elif view == "right":
+        ref = right
+        disp = disparity_sgbm(np.ascontiguousarray(right[:, ::-1]), np.ascontiguousarray(left[:, ::-1]),
+                              num_disparities, block_size, paths=8)[:, ::-1]
+    else:
+        raise ConfigError("view", f"must be 'left' or 'right', got {view!r}")
+    disp = fill_disparity_sky(np.where(texture_mask(ref, min_texture), disp, 0.0))
+    with np.errstate(divide="ignore"):
+        depth = np.where(disp > 0, calib.bf / np.maximum(disp, 1e-6), np.inf)
+    return np.minimum(depth, float(max_depth)).astype(np.float32)
 
 
 def ray_length(depth_z: np.ndarray, calib: StereoCalibration) -> np.ndarray:

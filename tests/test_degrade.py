@@ -146,8 +146,10 @@ def test_rendered_haze_depth_needs_a_generated_sequence(tmp_path):
 
 
 def test_haze_depth_auto_is_sgbm_on_real_data():
-    """auto: KITTI and the bundled EuRoC snippet (no rendered depth) get SGBM; a bad name is refused."""
-    assert resolve_haze_depth("auto", "kitti") == "stereo"
+    """auto: KITTI (outdoor) and the bundled EuRoC snippet (a hall; no rendered depth) get SGBM: KITTI the
+    textured-SGBM, sky-far depth (``stereo-sky``, s22), EuRoC the plain one; a bad name is refused."""
+    assert resolve_haze_depth("auto", "kitti") == "stereo-sky"
+    assert resolve_haze_depth("stereo", "kitti") == "stereo"
     assert resolve_haze_depth("auto", "euroc") == "stereo"
     assert resolve_haze_depth("stereo", "euroc") == "stereo"
     with pytest.raises(ConfigError, match="haze-depth"):

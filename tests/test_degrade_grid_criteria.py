@@ -81,7 +81,8 @@ def test_generated_cells_take_rendered_haze_by_default_and_are_cached_apart(tmp_
     seq = generate_sequence("day-loop", tmp_path / "seq", n_frames=1, seed=3, workers=1, noise=False)
     hazy, dark = grid_cells((1.0,), (0.06,), ("high",)) + grid_cells((0.15,), (0.0,), ("high",))
     assert grid.cell_haze_depth("auto", "day-loop", "euroc", seq) == "rendered"
-    assert grid.cell_haze_depth("auto", "kitti", "kitti", seq) == "stereo"
+    assert grid.cell_haze_depth("auto", "kitti", "kitti", seq) == "stereo-sky"
+    assert grid.cell_haze_depth("stereo", "kitti", "kitti", seq) == "stereo"
     assert grid.cell_haze_depth("stereo", "day-loop", "euroc", seq) == "stereo"
     cache = tmp_path / "cells"
     rendered, tmp1 = grid.degraded_cell("euroc", "day-loop", seq, hazy, 1, tmp_path, cache, "rendered")

@@ -16,9 +16,12 @@ The physics lives in ``canopy.degrade``; this tool does the files.
 KITTI (rectified images): ``calib.txt``, ``times.txt``, ``poses.txt`` and
 every other non-image file at the top level are copied verbatim; the
 degraded pairs go to folders with the input's names (``image_0``/``image_1``
-or ``image_l``/``image_r``) under the input's file names. Haze depth: SGBM on
-the clean rectified pair, one depth map per camera (the right one by matching
-the mirrored pair).
+or ``image_l``/``image_r``) under the input's file names. Haze depth (``--haze-depth
+auto``): ``stereo-sky`` (``canopy.degrade.depth_for_haze``: 8-path SGBM on the clean
+rectified pair kept where the image has texture, holes filled from the farthest
+neighbour in row and column, sky far), one depth map per camera (the right one by
+matching the mirrored pair); ``stereo`` is the old SGBM map (every disparity kept, holes
+filled along rows), which paints far surfaces and sky too near (docs/notes/s22-hazepaint.md).
 
 EuRoC (raw, distorted images): the whole folder is copied (``mav0`` with
 ``sensor.yaml``, ``imu0``, ground truth, and top-level notes) except the
@@ -63,7 +66,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from canopy.degrade import (DEGRADE_MODES, NOISE_LEVELS, DegradeParams, degrade_image,  # noqa: E402
-                            depth_from_rendered, depth_from_stereo, ray_length)
+                            depth_for_haze, depth_from_rendered, depth_from_stereo, ray_length)
 from canopy.sources import BUNDLED_DATA, open_source  # noqa: E402
 from canopy.sources.base import IMAGE_SUFFIXES, load_yaml_file, numbers  # noqa: E402
 from canopy.sources.euroc import EurocSource  # noqa: E402
@@ -96,15 +99,18 @@ def _prepare_out(out: Path, src_root: Path, force: bool) -> None:
     out.mkdir(parents=True, exist_ok=True)
 
 
-def _ray_maps(left: np.ndarray, right: np.ndarray, calib, params: DegradeParams) -> list[np.ndarray]:
-    """Ray length (m) per rectified pixel, for the left and the right camera."""
-    return [ray_length(depth_from_stereo(left, right, calib, params.max_depth, params.num_disparities,
-                                         params.block_size, view=v), calib) for v in ("left", "right")]
+def _ray_maps(left: np.ndarray, right: np.ndarray, calib, params: DegradeParams,
+              haze_depth: str = "stereo") -> list[np.ndarray]:
+    """Ray length (m) per rectified pixel, for the left and the right camera, from the clean pair's
+    SGBM depth (``stereo``: ``depth_from_stereo``; ``stereo-sky``: ``depth_for_haze``)."""
+    depth = depth_for_haze if haze_depth == "stereo-sky" else depth_from_stereo
+    return [ray_length(depth(left, right, calib, params.max_depth, params.num_disparities,
+                             params.block_size, view=v), calib) for v in ("left", "right")]
 
 
 # -- KITTI --------------------------------------------------------------------------
 
-def _degrade_kitti(src: KittiSource, out: Path, params: DegradeParams, log) -> int:
+def _degrade_kitti(src: KittiSource, out: Path, params: DegradeParams, log, haze_depth: str = "stereo-sky") -> int:
     root = src.root
     for p in root.iterdir():
         if p.is_file() and p.suffix.lower() not in IMAGE_SUFFIXES:
@@ -114,7 +120,7 @@ def _degrade_kitti(src: KittiSource, out: Path, params: DegradeParams, log) -> i
     (out / right_dir).mkdir()
     for i in range(len(src)):
         frame = src.frame(i)
-        rays = _ray_maps(frame.left, frame.right, src.calibration, params) if params.haze else [None, None]
+        rays = _ray_maps(frame.left, frame.right, src.calibration, params, haze_depth) if params.haze else [None, None]
         for cam, (img, ray, path, folder) in enumerate(zip((frame.left, frame.right), rays,
                                                             (src.left_paths[i], src.right_paths[i]),
                                                             (left_dir, right_dir))):
@@ -216,7 +222,7 @@ def _degrade_euroc(src: EurocSource, out: Path, params: DegradeParams, log, haze
                 maps = _rendered_rays(depth_dir / src.left_paths[i].name, forward[0], src.calibration, params)
             else:
                 frame = src.frame(i)
-                maps = _ray_maps(frame.left, frame.right, src.calibration, params)
+                maps = _ray_maps(frame.left, frame.right, src.calibration, params, haze_depth)
             rays = [inv.pull(r) for inv, r in zip(inverses, maps)]
         for cam, path in enumerate((src.left_paths[i], src.right_paths[i])):
             img = degrade_image(raw[cam], params, rays[cam], _frame_rng(params.seed, i, cam))
@@ -240,7 +246,7 @@ def _csv_name(line: str) -> str:
 
 # -- entry points ------------------------------------------------------------------------
 
-HAZE_DEPTHS = ("auto", "stereo", "rendered")
+HAZE_DEPTHS = ("auto", "stereo", "stereo-sky", "rendered")
 
 
 def _depth_dir(src) -> Path:
@@ -258,10 +264,12 @@ def _check_haze_depth(haze_depth: str, dataset: str) -> None:
 
 
 def resolve_haze_depth(haze_depth: str, dataset: str, path: str | Path | None = None, src=None) -> str:
-    """``stereo`` or ``rendered``: the depth the haze of ``dataset`` at ``path`` is made from.
+    """``stereo``, ``stereo-sky`` or ``rendered``: the depth the haze of ``dataset`` at ``path`` is made from.
 
     ``auto`` (the default) takes the renderer's exact depth where the sequence has it (generated
-    sequences, ``mav0/depth0``) and SGBM on the clean pair otherwise (real data): SGBM depth of a
+    sequences, ``mav0/depth0``) and SGBM on the clean pair otherwise (real data): ``stereo-sky``
+    on KITTI (outdoor: textureless sky is far, ``depth_for_haze``), ``stereo`` on EuRoC (a hall: the
+    top of the image is a ceiling, not sky; its recorded cells keep their haze). SGBM depth of a
     generated pair is blocky, has holes (painted as ``max_depth`` streaks) and differs between the
     two cameras, so the haze itself adds texture that is not in the scene (docs/notes/s8-haze.md,
     the dark-rows cell). ``stereo`` / ``rendered`` force one (``rendered`` on KITTI is an error)."""
@@ -269,7 +277,7 @@ def resolve_haze_depth(haze_depth: str, dataset: str, path: str | Path | None = 
     if haze_depth != "auto":
         return haze_depth
     if dataset != "euroc":
-        return "stereo"
+        return "stereo-sky"
     src = src if src is not None else open_source(dataset, path, max_frames=1)
     return "rendered" if _depth_dir(src).is_dir() else "stereo"
 
@@ -280,7 +288,8 @@ def degrade_sequence(dataset: str, out: str | Path, params: DegradeParams, path:
     """Write the degraded copy of ``dataset`` at ``path`` (None: bundled) to ``out``; return ``out``.
 
     ``haze_depth``: ``auto`` (the renderer's depth where the sequence has it, else SGBM:
-    ``resolve_haze_depth``), ``stereo`` (SGBM on the clean pair, any dataset) or ``rendered`` (the
+    ``resolve_haze_depth``), ``stereo`` (SGBM on the clean pair, any dataset), ``stereo-sky`` (SGBM
+    kept where textured, sky far: ``canopy.degrade.depth_for_haze``) or ``rendered`` (the
     renderer's exact left depth, ``mav0/depth0`` of a generated sequence; needed where the clean pair
     is too dark for SGBM, e.g. dark-rows: docs/notes/s8-haze.md). DEGRADED.yaml records the one used."""
     _check_haze_depth(haze_depth, dataset)  # bad names fail before the source is opened
@@ -296,7 +305,8 @@ def degrade_sequence(dataset: str, out: str | Path, params: DegradeParams, path:
         if progress:
             print(f"\r{dataset}: frame {i + 1}/{len(src)}", end="", file=sys.stderr, flush=True)
 
-    n = _degrade_kitti(src, out, params, log) if dataset == "kitti" else _degrade_euroc(src, out, params, log, haze_depth)
+    n = (_degrade_kitti(src, out, params, log, haze_depth) if dataset == "kitti"
+         else _degrade_euroc(src, out, params, log, haze_depth))
     if progress:
         print(file=sys.stderr)
     record = {"input": str(src.root.resolve()), "dataset": dataset, "frames": n,
@@ -330,7 +340,9 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=d.seed)
     ap.add_argument("--haze-depth", choices=HAZE_DEPTHS, default="auto",
                     help="haze depth: the renderer's depth where the sequence has it (generated sequences), "
-                         "else SGBM on the clean pair (auto, default); or force SGBM (stereo) / rendered")
+                         "else SGBM on the clean pair (auto, default: stereo-sky on KITTI, stereo on EuRoC); "
+                         "or force one: stereo (SGBM, every disparity), stereo-sky (textured SGBM, sky far), "
+                         "rendered")
     ap.add_argument("--max-frames", type=int, default=None)
     ap.add_argument("--force", action="store_true", help="replace a non-empty output folder")
     args = ap.parse_args(argv)

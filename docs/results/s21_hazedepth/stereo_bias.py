@@ -86,6 +86,10 @@ def main() -> int:
     ap.add_argument("--method", default="auto")
     ap.add_argument("--set", action="append", default=[])
     ap.add_argument("--out", default=None)
+    ap.add_argument("--ref", choices=("auto", "clean"), default="auto",
+                    help="reference disparity: auto = the exact depth where the clean sequence has it, else the "
+                         "clean pair's; clean = the clean pair's refined disparity at the same keypoints on a "
+                         "preset too (KITTI's measure, no depth-edge exclusion; s22-hazepaint)")
     ap.add_argument("--fit", choices=("parabola", "equiangular"), default="parabola",
                     help="sub-pixel fit of the SAD minimum (equiangular: Shimizu & Okutomi's V fit for SAD)")
     args = ap.parse_args()
@@ -102,7 +106,7 @@ def main() -> int:
     print(json.dumps({k: out.get(k) for k in ("tracked", "ate", "ate_sim3", "scale")}))
     clean = open_source(args.kind, Path(args.clean), max_frames=args.frames)
     depth_dir = Path(args.clean) / "mav0" / "depth0" / "data"
-    exact = depth_dir.is_dir()
+    exact = depth_dir.is_dir() and args.ref == "auto"
     cams = sorted((Path(args.clean) / "mav0" / "cam0" / "data").glob("*.png")) if exact else None
     recs = []
     for idx, left, st, calib, params in RECORD:
@@ -119,7 +123,7 @@ def main() -> int:
             ur, _, good = subpixel_refine(c.left, c.right, uv, st.u_right[ok].astype(np.float64), left.octave[ok], sf,
                                           params.subpixel_window, params.subpixel_search, params.subpixel_normalise)
             d_ref = np.where(good, uv[:, 0] - (ur - params.disparity_offset_for(left.extractor)), np.nan)
-        recs.append(np.column_stack([np.full(len(ok), idx), left.octave[ok], d_est, d_ref, calib.bf / d_est]))
+        recs.append(np.column_stack([np.full(len(ok), idx), left.octave[ok], d_est, d_ref, calib.bf / d_est, uv]))
     A = np.concatenate(recs)
     fin = np.isfinite(A[:, 3]) & (A[:, 3] > 0)
     A = A[fin]
@@ -149,7 +153,7 @@ def main() -> int:
     frac = A[:, 2] - np.floor(A[:, 2])
     hist = np.histogram(frac, bins=10, range=(0, 1))[0]
     print("fractional part of the estimated disparity (pixel locking shows as peaks at 0 / 1):", hist.tolist())
-    if args.out:
+    if args.out:  # columns: frame, octave, disparity, reference disparity, depth, u, v
         np.save(args.out, A)
     return 0
 
