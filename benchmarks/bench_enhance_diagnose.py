@@ -83,6 +83,31 @@ def stereo_errors(tracker, frame, kwargs, ref_disp):
             "d_bad": float(np.mean(~near)) if len(err) else np.nan}
 
 
+class TrajectoryRecorder:
+    """The in-process loop's bookkeeping, as the actors do it: a keyframe goes to the local mapper (its map update
+    scheduled by ``schedule``), and each frame's pose is kept relative to its reference keyframe, so that the
+    trajectory is rebuilt on the mapper's final keyframe poses (the actors' trajectory writer)."""
+
+    def __init__(self):
+        self.poses, self.rel, self.refs, self.statuses = [], [], [], []
+
+    def add(self, res, frame_index: int, schedule, mapper) -> None:
+        if res.is_keyframe and res.keyframe is not None:
+            schedule.keyframe_sent(res.keyframe.index, frame_index)
+            schedule.hold(mapper.insert_keyframe(res.keyframe))
+        self.poses.append(res.T_world_cam.copy())
+        self.rel.append(None if res.T_ref_cam is None else res.T_ref_cam.copy())
+        self.refs.append(res.reference_kf_index)
+        self.statuses.append(res.status)
+
+    def trajectory(self, mapper) -> tuple[np.ndarray, np.ndarray]:
+        """(N×4×4 poses on the final keyframes, N booleans: tracked)."""
+        kf = mapper.keyframe_poses()
+        est = np.array([kf[r] @ T if T is not None and r in kf else P
+                        for T, r, P in zip(self.rel, self.refs, self.poses)])
+        return est, np.array([s in ("ok", "init") for s in self.statuses])
+
+
 def run(path, clean_path, dataset, enh_sets, track_sets, max_frames=None, per_frame=False, stereo=True,
         fast_rule="actor", kind=None, map_sets=None):
     """``dataset``: the config (configs/<dataset>.yaml); ``kind``: the source layout (default ``dataset``);
@@ -97,7 +122,7 @@ def run(path, clean_path, dataset, enh_sets, track_sets, max_frames=None, per_fr
     mapper = LocalMapper(src.calibration, replace(cfg.mapping, **(map_sets or {})))
     # map updates applied when the actors' lockstep applies them (runtime.map_update_lag_frames)
     schedule = MapUpdateSchedule(effective_map_update_lag(cfg.runtime.map_update_lag_frames, tp, cfg.runtime.sensor))
-    rows, poses, rel, refs, statuses = [], [], [], [], []
+    rows, recorder = [], TrajectoryRecorder()
     for i in range(len(src)):
         fr = src.frame(i)
         for update in schedule.take_due(fr.index):
@@ -115,18 +140,10 @@ def run(path, clean_path, dataset, enh_sets, track_sets, max_frames=None, per_fr
         res = tracker.track(frame, **kw, sensor_sigma=info["noise_sigma"])
         row.update(status=res.status, inl=int(res.n_inliers), matches=int(res.n_matches),
                    noise=res.noise_sigma, reason=res.lost_reason)
-        if res.is_keyframe and res.keyframe is not None:
-            schedule.keyframe_sent(res.keyframe.index, fr.index)
-            schedule.hold(mapper.insert_keyframe(res.keyframe))
-        poses.append(res.T_world_cam.copy())
-        rel.append(None if res.T_ref_cam is None else res.T_ref_cam.copy())
-        refs.append(res.reference_kf_index)
-        statuses.append(res.status)
+        recorder.add(res, fr.index, schedule, mapper)
         rows.append(row)
-    kf = mapper.keyframe_poses()
-    est = np.array([kf[r] @ T if T is not None and r in kf else P for T, r, P in zip(rel, refs, poses)])
+    est, tracked = recorder.trajectory(mapper)
     gt = clean.ground_truth.poses[: len(est)]
-    tracked = np.array([s in ("ok", "init") for s in statuses])
     out = {"tracked": float(tracked.mean())}
     if tracked.sum() >= 3:
         try:

@@ -37,7 +37,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from bench_degrade_grid import degraded_cell, cell_haze_depth  # noqa: E402
-from bench_enhance_diagnose import actor_fast, enhance_pair  # noqa: E402
+from bench_enhance_diagnose import TrajectoryRecorder, actor_fast, enhance_pair  # noqa: E402
 from canopy.backend import LocalMapper  # noqa: E402
 from canopy.config import load_run_config, parse_value  # noqa: E402
 from canopy.degrade import grid_cells  # noqa: E402
@@ -121,7 +121,7 @@ def run_cell(path: Path, clean_path, dataset: str, track_sets: dict) -> tuple[di
     schedule = MapUpdateSchedule(effective_map_update_lag(cfg.runtime.map_update_lag_frames, tp, cfg.runtime.sensor))
     gt = clean.ground_truth.poses
     far = 40.0 * src.calibration.baseline
-    rows, poses, rel, refs, statuses = [], [], [], [], []
+    rows, recorder = [], TrajectoryRecorder()
     T_prev = None
     for i in range(len(src)):
         fr = src.frame(i)
@@ -158,18 +158,10 @@ def run_cell(path: Path, clean_path, dataset: str, track_sets: dict) -> tuple[di
                 row["dev_pred"], row["k_z"] = float(np.linalg.norm(d)), float(d[2] / row["sd_z"])
             except np.linalg.LinAlgError:
                 pass
-        if res.is_keyframe and res.keyframe is not None:
-            schedule.keyframe_sent(res.keyframe.index, fr.index)
-            schedule.hold(mapper.insert_keyframe(res.keyframe))
+        recorder.add(res, fr.index, schedule, mapper)
         T_prev = res.T_world_cam.copy()
-        poses.append(res.T_world_cam.copy())
-        rel.append(None if res.T_ref_cam is None else res.T_ref_cam.copy())
-        refs.append(res.reference_kf_index)
-        statuses.append(res.status)
         rows.append(row)
-    kf = mapper.keyframe_poses()
-    est = np.array([kf[r] @ T if T is not None and r in kf else P for T, r, P in zip(rel, refs, poses)])
-    tracked = np.array([s in ("ok", "init") for s in statuses])
+    est, tracked = recorder.trajectory(mapper)
     out = {"tracked": float(tracked.mean())}
     if tracked.sum() >= 3:
         out["ate"] = ape(est[tracked], gt[: len(est)][tracked], "se3")["rmse"]
