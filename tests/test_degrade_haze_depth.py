@@ -31,14 +31,15 @@ def dusk(tmp_path_factory):
 def test_sky_sgbm_haze_is_closer_to_the_exact_depth_haze(dusk):
     """A generated dusk-loop frame (trees, a dark ground, uniform sky), both cameras, β 0.06: the haze
     painted from ``depth_for_haze`` is nearer the exact-depth haze than the old SGBM haze everywhere it
-    is measured -- near depth edges, away from them, and beyond 40 m (measured: near 13.1 -> 12.0, far
-    44.3 -> 26.2 grey levels, too little airlight: -44.3 -> -26.2)."""
+    is measured -- near depth edges, away from them, and beyond 40 m. Measured with OpenCV 5.0.0: near 13.1
+    -> 12.0, far 44.3 -> 26.2 grey levels (too little airlight: -44.3 -> -26.2); with 5.1.0, whose SGBM differs:
+    near 8.0 -> 6.9, far 23.7 -> 2.4 (-23.7 -> -2.4). So the bounds are relative, plus the sign of the old error."""
     err = measure(dusk, 1, 0.06, 1.5)
     old, new = err["stereo"], err["stereo-sky"]
     assert new["near_abs"] < 0.95 * old["near_abs"]
     assert new["all_abs"] < 0.8 * old["all_abs"]
     assert new["far_abs"] < 0.7 * old["far_abs"]
-    assert old["far_signed"] < -30.0 and new["far_signed"] > old["far_signed"]  # too near: too little airlight
+    assert old["far_signed"] < -10.0 and new["far_signed"] > old["far_signed"]  # too near: too little airlight
 
 
 def test_fill_disparity_sky_takes_the_farthest_neighbour_and_sky_is_far():
