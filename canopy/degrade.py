@@ -292,17 +292,27 @@ def depth_from_stereo(left: np.ndarray, right: np.ndarray, calib: StereoCalibrat
     ``max_depth``, become ``max_depth``.
     """
     _check_sgbm(max_depth, num_disparities, block_size)
-    if view == "left":
-        disp = disparity_sgbm(left, right, num_disparities, block_size)
-    elif view == "right":
-        # Mirror both images: the right view becomes a left reference looking at a
-        # mirrored left image, with the same (positive) disparities.
-        disp = disparity_sgbm(np.ascontiguousarray(right[:, ::-1]), np.ascontiguousarray(left[:, ::-1]),
-                              num_disparities, block_size)[:, ::-1]
-    else:
-        raise ConfigError("view", f"must be 'left' or 'right', got {view!r}")
+    disp = view_disparity(left, right, view, num_disparities, block_size)
     if fill:
         disp = fill_disparity_background(disp)
+    return _depth_from_disparity(disp, calib, max_depth)
+
+
+def view_disparity(left: np.ndarray, right: np.ndarray, view: str, num_disparities: int = 128,
+                   block_size: int = 5, paths: int = 5) -> np.ndarray:
+    """SGBM disparity (``disparity_sgbm``) of the ``view`` camera ("left" or "right") of a rectified pair."""
+    if view == "left":
+        return disparity_sgbm(left, right, num_disparities, block_size, paths)
+    if view == "right":
+        # Mirror both images: the right view becomes a left reference looking at a
+        # mirrored left image, with the same (positive) disparities.
+        return disparity_sgbm(np.ascontiguousarray(right[:, ::-1]), np.ascontiguousarray(left[:, ::-1]),
+                              num_disparities, block_size, paths)[:, ::-1]
+    raise ConfigError("view", f"must be 'left' or 'right', got {view!r}")
+
+
+def _depth_from_disparity(disp: np.ndarray, calib: StereoCalibration, max_depth: float) -> np.ndarray:
+    """bf / disparity (float32 m); invalid (≤ 0) disparities and depths beyond ``max_depth`` are ``max_depth``."""
     with np.errstate(divide="ignore"):
         depth = np.where(disp > 0, calib.bf / np.maximum(disp, 1e-6), np.inf)
     return np.minimum(depth, float(max_depth)).astype(np.float32)
@@ -420,18 +430,10 @@ def depth_for_haze(left: np.ndarray, right: np.ndarray, calib: StereoCalibration
     (``texture_mask``), holes filled by ``fill_disparity_sky``; beyond ``max_depth`` is ``max_depth``.
     """
     _check_sgbm(max_depth, num_disparities, block_size)
-    if view == "left":
-        ref, disp = left, disparity_sgbm(left, right, num_disparities, block_size, paths=8)
-    elif view == "right":
-        ref = right
-        disp = disparity_sgbm(np.ascontiguousarray(right[:, ::-1]), np.ascontiguousarray(left[:, ::-1]),
-                              num_disparities, block_size, paths=8)[:, ::-1]
-    else:
-        raise ConfigError("view", f"must be 'left' or 'right', got {view!r}")
-    disp = fill_disparity_sky(np.where(texture_mask(ref, min_texture), disp, 0.0))
-    with np.errstate(divide="ignore"):
-        depth = np.where(disp > 0, calib.bf / np.maximum(disp, 1e-6), np.inf)
-    return np.minimum(depth, float(max_depth)).astype(np.float32)
+    disp = view_disparity(left, right, view, num_disparities, block_size, paths=8)
+    ref = left if view == "left" else right
+    return _depth_from_disparity(fill_disparity_sky(np.where(texture_mask(ref, min_texture), disp, 0.0)),
+                                 calib, max_depth)
 
 
 def ray_length(depth_z: np.ndarray, calib: StereoCalibration) -> np.ndarray:
