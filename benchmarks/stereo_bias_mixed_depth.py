@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from canopy.sources import open_source  # noqa: E402
-from tools.degrade_sequence import _euroc_rectification  # noqa: E402
+from tools.degrade_sequence import _euroc_rectification, rectify_nearest  # noqa: E402
 
 WINDOW = 15
 SPAN = 1.2
@@ -36,7 +36,7 @@ def mixed_depth(A: np.ndarray, clean: Path, frames: int | None) -> np.ndarray:
     for f in np.unique(A[:, 0]).astype(int):
         m = A[:, 0] == f
         raw = cv2.imread(str(clean / "mav0" / "depth0" / "data" / src.left_paths[f].name), cv2.IMREAD_UNCHANGED)
-        z = cv2.remap(raw, *forward[0], cv2.INTER_NEAREST).astype(np.float32) / 1000.0
+        z = rectify_nearest(raw, forward[0]).astype(np.float32) / 1000.0
         lz = np.log(np.where(z > 0, z, 200.0))
         span = cv2.dilate(lz, k) - cv2.erode(lz, k)
         u = np.clip(np.rint(A[m, 5]).astype(int), 0, z.shape[1] - 1)

@@ -175,13 +175,23 @@ def _euroc_rectification(src: EurocSource) -> tuple[list[_RawToRectified], list[
     return inverses, forward
 
 
+def rectify_nearest(image: np.ndarray, forward) -> np.ndarray:
+    """``image`` (raw camera) resampled into the rectified view by nearest neighbour, for values that
+    must not blend (depth). The forward maps are converted to float first: OpenCV 5.0.0's nearest
+    ``remap`` with fixed-point (CV_16SC2) maps shifted the result (on the generated presets, whose
+    maps are the identity, 90 % of the depth pixels moved), so hazy cells painted with 5.0.0 and
+    5.1.0 differed; float maps give the same exact lookup on every version (s23-lead note)."""
+    map_x, map_y = cv2.convertMaps(*forward, cv2.CV_32FC1)
+    return cv2.remap(image, map_x, map_y, cv2.INTER_NEAREST)
+
+
 def _rendered_rays(depth_png: Path, forward_left, calib, params: DegradeParams) -> list[np.ndarray]:
     """Ray length per rectified pixel of both cameras from the renderer's left depth (uint16 mm,
     0 = sky), rectified as the source rectifies cam0 (nearest: depth must not blend across edges)."""
     raw = cv2.imread(str(depth_png), cv2.IMREAD_UNCHANGED)
     if raw is None or raw.dtype != np.uint16:
         raise InputError(depth_png, "rendered depth: expected a uint16 PNG (mm)")
-    z = cv2.remap(raw, *forward_left, cv2.INTER_NEAREST).astype(np.float64) / 1000.0
+    z = rectify_nearest(raw, forward_left).astype(np.float64) / 1000.0
     return [ray_length(depth_from_rendered(z, calib, params.max_depth, view=v), calib) for v in ("left", "right")]
 
 
