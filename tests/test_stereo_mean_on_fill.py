@@ -58,16 +58,19 @@ def _errors(fl, st, clean):
     return np.abs((uv[s, 0] - st.u_right[s]) - d_ref[s])
 
 
-def test_off_by_default_and_in_no_config():
+def test_off_by_default_on_in_kitti_only():
+    """KITTI switches it on (s23: its lit hazy cells' scale bias); EuRoC and the presets were not measured
+    with it and keep ORB-SLAM2's centre SAD."""
     assert TrackingParams().subpixel_mean_on_fill is False
-    for name in ("kitti", "euroc", "synthetic"):
+    assert load_run_config("kitti").tracking.subpixel_mean_on_fill is True
+    for name in ("euroc", "synthetic"):
         assert load_run_config(name).tracking.subpixel_mean_on_fill is False
 
 
 @pytest.mark.parametrize("frame_index", [10, 30])
 def test_hazy_pair_disparities_closer_to_the_clean_pair(frame_index):
     src, clean, left, right = _pair(frame_index, 0.03)
-    off, on = _params(), _params(subpixel_mean_on_fill=True)
+    off, on = _params(subpixel_mean_on_fill=False), _params(subpixel_mean_on_fill=True)
     fl, base = _matches(off, left, right, src.calibration)
     assert fill_active(fl, on, left)                     # the lighter haze opens the fill-in gate
     fl2, mean = _matches(on, left, right, src.calibration)
@@ -80,7 +83,7 @@ def test_hazy_pair_disparities_closer_to_the_clean_pair(frame_index):
 
 def test_clean_pair_keeps_its_matches():
     src, _, left, right = _pair(20, 0.0)
-    off, on = _params(), _params(subpixel_mean_on_fill=True)
+    off, on = _params(subpixel_mean_on_fill=False), _params(subpixel_mean_on_fill=True)
     fl, base = _matches(off, left, right, src.calibration)
     assert not fill_active(fl, on, left)
     _, same = _matches(on, left, right, src.calibration)
