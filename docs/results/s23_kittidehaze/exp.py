@@ -1,12 +1,6 @@
 """Guided dehaze experiment: monkeypatch the in-process runner's enhance_pair. usage: exp.py omega radius eps t0 [cells...]"""
 import os, sys
-from pathlib import Path
-HERE = Path(__file__).resolve().parent
-ROOT = HERE.parents[2]                       # the worktree
-sys.path[:0] = [str(HERE), str(ROOT / "benchmarks"), str(ROOT)]
-CELLS = os.environ.get("CELLS_CACHE", "/tmp/kittidehaze-cache")   # the grid runner's --cells-cache
-CLEAN = str(ROOT / "data/kitti06_snippet")
-ORACLE_T = os.environ.get("ORACLE_T", "/tmp/kittidehaze/oracle_t.npz")   # written by oracle_t.py
+from _paths import CELLS, CLEAN, HERE, ORACLE_T, ROOT  # noqa: F401 (also puts the repo on sys.path)
 
 import sys, json, types
 import bench_enhance_diagnose as bed

@@ -1,13 +1,7 @@
 """Forced agri / dehaze with the right image dehazed with the left image's A (SHARED=1) or its own (SHARED=0).
 usage: exp_shared.py agri|dehaze [cells]"""
 import os, sys
-from pathlib import Path
-HERE = Path(__file__).resolve().parent
-ROOT = HERE.parents[2]                       # the worktree
-sys.path[:0] = [str(HERE), str(ROOT / "benchmarks"), str(ROOT)]
-CELLS = os.environ.get("CELLS_CACHE", "/tmp/kittidehaze-cache")   # the grid runner's --cells-cache
-CLEAN = str(ROOT / "data/kitti06_snippet")
-ORACLE_T = os.environ.get("ORACLE_T", "/tmp/kittidehaze/oracle_t.npz")   # written by oracle_t.py
+from _paths import CELLS, CLEAN, HERE, ORACLE_T, ROOT  # noqa: F401 (also puts the repo on sys.path)
 
 import sys, os
 import bench_enhance_diagnose as bed

@@ -1,13 +1,7 @@
 """The exact transmission the degradation tool painted KITTI's haze with (stereo-sky depth of the clean pair,
 β 0.06, both views), as uint8 t·255 per frame -> /tmp/kittidehaze/oracle_t.npz"""
 import os, sys
-from pathlib import Path
-HERE = Path(__file__).resolve().parent
-ROOT = HERE.parents[2]                       # the worktree
-sys.path[:0] = [str(HERE), str(ROOT / "benchmarks"), str(ROOT)]
-CELLS = os.environ.get("CELLS_CACHE", "/tmp/kittidehaze-cache")   # the grid runner's --cells-cache
-CLEAN = str(ROOT / "data/kitti06_snippet")
-ORACLE_T = os.environ.get("ORACLE_T", "/tmp/kittidehaze/oracle_t.npz")   # written by oracle_t.py
+from _paths import CELLS, CLEAN, HERE, ORACLE_T, ROOT  # noqa: F401 (also puts the repo on sys.path)
 
 import numpy as np
 from canopy.degrade import depth_for_haze, ray_length, transmission
