@@ -384,11 +384,13 @@ def main(argv=None) -> int:
         if section not in ("tracking", "enhancement", "mapping"):
             raise SystemExit(f"bench_degrade_grid: --set {section}.{field}: only tracking.*, enhancement.* and "
                              "mapping.* settings")
-    if settings:  # unknown fields and bad values fail here, named, before any run
-        try:
-            with_settings(load_run_config("kitti"), settings)
-        except ConfigError as exc:
-            raise SystemExit(f"bench_degrade_grid: --set {exc}") from None
+    if settings:  # unknown fields and bad values fail here, named, before any run, on each dataset's config
+        configs = {"synthetic" if name in PRESETS else name for name in args.datasets or ("kitti",)}
+        for config in sorted(configs):  # (a setting may need another of that config's, e.g. the fill-in's gate)
+            try:
+                with_settings(load_run_config(config), settings)
+            except ConfigError as exc:
+                raise SystemExit(f"bench_degrade_grid: --set {exc}") from None
     if args.merge:
         return merge(args.merge, Path(args.out_dir))
 

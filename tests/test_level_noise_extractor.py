@@ -101,3 +101,38 @@ def test_switch_reaches_the_gated_extractor_and_leaves_clean_frames_to_cv2_orb(f
     # the hazy noisy one the per-level extraction
     extract(gate, noisy[0])
     assert gate.last_used == "cells" and len(gate.cells.last_level_thresholds) == params().n_levels
+
+
+def hazy_noisy_day_loop_frame() -> np.ndarray:
+    """Generated day-loop frame 20 with haze 0.06 + the noisy sensor: a full-light orchard whose texture
+    stands above the noise at full resolution (texture excess ~1.4 grey levels against dark-rows' ~0.4)."""
+    gen = SequenceGenerator(resolve_params("day-loop", n_frames=40), 0)
+    left, _, depth = gen.stereo(20)
+    hazy = DegradeParams(mode="haze+noise", gain=1.0, full_well=FULL_WELL, read_noise=READ_NOISE, beta=0.06)
+    return degrade_image(left, hazy, ray_length(depth, gen.calibration), 1)
+
+
+def test_texture_gate_gives_the_level_floors_only_to_images_whose_texture_is_under_the_noise(frames):
+    _, noisy = frames
+    gated = tracking_extractor(params(noisy_extractor_level_noise=True, noisy_extractor_level_noise_max_texture=0.8),
+                               responses=False)
+    # the dark-rows hazy frame: texture excess under 0.8 -> each level's own floor, s17's corners to the pixel
+    f = extract(gated, noisy[0])
+    assert gated.last_used == "level_cells" and gated.last_texture < 0.8
+    g = extract(tracking_extractor(params(noisy_extractor_level_noise=True), responses=False), noisy[0])
+    assert np.array_equal(f.uv, g.uv) and np.array_equal(f.descriptors, g.descriptors)
+    # the textured day-loop hazy frame: per-cell extraction with one floor, as without the switch
+    day = hazy_noisy_day_loop_frame()
+    f = extract(gated, day)
+    assert gated.last_used == "cells" and gated.last_texture >= 0.8
+    g = extract(tracking_extractor(params(), responses=False), day)
+    assert np.array_equal(f.uv, g.uv) and np.array_equal(f.descriptors, g.descriptors)
+    h = extract(tracking_extractor(params(noisy_extractor_level_noise=True), responses=False), day)
+    assert not np.array_equal(h.uv, f.uv)  # the ungated switch would have changed this frame
+
+
+def test_texture_gate_needs_the_level_noise_switch():
+    with pytest.raises(Exception, match="noisy_extractor_level_noise_max_texture"):
+        params(noisy_extractor_level_noise_max_texture=0.8)
+    with pytest.raises(Exception, match="noisy_extractor_level_noise_max_texture"):
+        params(noisy_extractor_level_noise=True, noisy_extractor_level_noise_max_texture=-1.0)

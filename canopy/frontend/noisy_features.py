@@ -147,10 +147,16 @@ class NoiseGatedExtractor:
         self.params = params
         self.opencv = OrbExtractor(params)
         n = params.noisy_extractor_n_features or params.n_features
-        cells = LevelNoiseCellExtractor if params.noisy_extractor_level_noise else CellExtractor
-        self.cells = cells(replace(params, extractor="cells", n_features=n), responses)
+        cell_params = replace(params, extractor="cells", n_features=n)
+        # per-level FAST floors (s17) on every per-cell image, or with a texture test only on the flat ones
+        # (s24: self.level_cells, chosen per image in extract)
+        gated = params.noisy_extractor_level_noise and params.noisy_extractor_level_noise_max_texture > 0
+        cells = LevelNoiseCellExtractor if params.noisy_extractor_level_noise and not gated else CellExtractor
+        self.cells = cells(cell_params, responses)
+        self.level_cells = LevelNoiseCellExtractor(cell_params, responses) if gated else None
         self.last_used = ""
         self.last_robust_sigma: float | None = None
+        self.last_texture: float | None = None
 
     def extract(self, image: np.ndarray, fast_threshold: int | None = None,
                 fallback_threshold: int | None = None, min_keypoints: int = 0,
@@ -159,8 +165,12 @@ class NoiseGatedExtractor:
         if fallback_threshold is None:
             sigma = self._noisy(image, noise_sigma)
             if sigma is not None:
-                self.last_used = "cells"
-                features = self.cells.extract(image, fast_threshold, None, min_keypoints, noise_sigma=sigma)
+                self.last_used, cells = "cells", self.cells
+                if self.level_cells is not None and self.last_texture is not None \
+                        and self.last_texture < self.params.noisy_extractor_level_noise_max_texture:
+                    # texture under the noise at full resolution: each level's own FAST floor (s24)
+                    self.last_used, cells = "level_cells", self.level_cells
+                features = cells.extract(image, fast_threshold, None, min_keypoints, noise_sigma=sigma)
                 features.robust_noise_sigma = self.last_robust_sigma
                 return features
         elif self.params.enhanced_cells_min_corners > 0:
@@ -191,6 +201,7 @@ class NoiseGatedExtractor:
         grey levels, noisy and hazy / washed-out rows 0.0-1.7. The robust sigma is measured first, so
         a clean image costs one estimate (the mean one only when the tracker did not measure it)."""
         p = self.params
+        self.last_texture = None
         if not p.noisy_extractor_robust:
             sigma = image_noise_sigma(image) if noise_sigma is None else float(noise_sigma)
             return sigma if sigma >= p.noisy_extractor_sigma else None
@@ -198,6 +209,7 @@ class NoiseGatedExtractor:
         self.last_robust_sigma = robust
         if sigma is None:
             return None
+        self.last_texture = sigma - robust
         if p.noisy_extractor_max_texture > 0 and sigma - robust >= p.noisy_extractor_max_texture:
             return None
         return sigma

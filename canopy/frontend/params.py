@@ -344,6 +344,10 @@ class TrackingParams:
     # s17-darkrows: NoiseGatedExtractor's per-cell extraction with each coarser pyramid level's FAST
     # thresholds from that level's own noise sigma (canopy.frontend.level_noise_extractor). False: off.
     noisy_extractor_level_noise: bool = False
+    # s24-lead: ... only on images whose texture excess (mean - robust sigma, the gate above) is below this
+    # many grey levels: the scene's texture is under the noise at full resolution and shows only on coarser
+    # levels (docs/notes/s24-lead.md). 0: no test (every per-cell image, s17's switch as it was).
+    noisy_extractor_level_noise_max_texture: float = 0.0
     # Stereo fill-in (canopy.frontend.stereo_fill): the left keypoints the descriptor matcher leaves
     # unmatched get a right column by LK flow (the right image's FAST misses half the far,
     # low-contrast corners of a hazy frame) on frames whose robust noise sigma is in

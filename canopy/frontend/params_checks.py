@@ -48,6 +48,11 @@ def validate_tracking_params(p: "TrackingParams") -> "TrackingParams":
     need(p.noisy_extractor_max_texture >= 0, "noisy_extractor_max_texture", "must be >= 0 (0: no test)")
     need(p.noisy_extractor_max_texture == 0 or p.noisy_extractor_robust, "noisy_extractor_max_texture",
          "needs noisy_extractor_robust: true (the excess is mean - robust sigma)")
+    need(p.noisy_extractor_level_noise_max_texture >= 0, "noisy_extractor_level_noise_max_texture",
+         "must be >= 0 (0: no test)")
+    need(p.noisy_extractor_level_noise_max_texture == 0
+         or (p.noisy_extractor_level_noise and p.noisy_extractor_robust), "noisy_extractor_level_noise_max_texture",
+         "needs noisy_extractor_level_noise: true and noisy_extractor_robust: true")
     need(p.grid_cols > 0 and p.grid_rows > 0, "grid_cols", "and grid_rows must be > 0")
     need(p.oversample >= 1.0, "oversample", "must be >= 1")
     need(0 <= p.stereo_max_hamming <= 256, "stereo_max_hamming", "must be in [0, 256]")
