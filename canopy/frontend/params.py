@@ -367,6 +367,11 @@ class TrackingParams:
     stereo_fill_enhanced_max_sensor_sigma: float = 0.0
     # s21-hazedepth: zero-mean SAD (subpixel_normalise "mean") on the frames the fill-in gate opens on (canopy.frontend.stereo)
     subpixel_mean_on_fill: bool = False
+    # s24-kittinoisy: zero-mean SAD also on hazy frames of the noisy sensor, whose pair the refinement smooths
+    # (robust sigma >= subpixel_denoise_sigma) and whose texture excess is below stereo_fill_max_texture (> 0
+    # needed: noise alone keeps its texture); the fill-in's gate is shut there (stereo_fill_max_sigma)
+    # (canopy.frontend.stereo_fill.mean_on_noisy_haze). False: off (docs/notes/s24-kittinoisy.md).
+    subpixel_mean_on_noisy_haze: bool = False
     # Stereo points whose disparity the image cannot pin (canopy.frontend.keypoint_uncertainty; issue 9's
     # haze + noisy sensor): on frames whose robust noise sigma is >= uncertain_stereo_min_noise, a stereo
     # point whose Cramer-Rao disparity sigma (the 11x11 SAD window's x-gradients against the noise) is at

@@ -25,6 +25,8 @@ per-match depth is 3x better on every gated cell, the trajectories better or wor
 (docs/notes/s21-hazedepth.md). On in configs/kitti.yaml since s23: on KITTI's lit hazy low-noise cells the
 centre SAD leaves the path 0.17-0.45 % short and the mean brings the scale closer to 1 on all 5 draws
 measured (ATE better on 6 of 8 cell-draws, mean 63.4 -> 44.4 mm; docs/notes/s23-lead.md).
+``subpixel_mean_on_noisy_haze`` (s24, off) opens it on the hazy frames of a noisy sensor too, whose pair the
+refinement smooths (``stereo_fill.mean_on_noisy_haze``; docs/notes/s24-kittinoisy.md).
 All steps are batched numpy (candidate pairs via row bands, one loop over pyramid levels).
 """
 from __future__ import annotations
@@ -316,12 +318,16 @@ def match_stereo(left: Features, right: Features | None, left_img: np.ndarray, r
     keep = unique_by_reference(li, ri, best_d[li])
     li, ri = li[keep], ri[keep]
 
-    fill = False
+    fill = noisy_haze = False
     if params.stereo_fill:  # hazy frames: flow for the unmatched keypoints (canopy.frontend.stereo_fill)
         from canopy.frontend.stereo_fill import fill_active, fill_unmatched_by_flow  # imports this module
         fill = fill_active(left, params, left_img, noise_sigma, sensor_sigma)
-    # the fill-in's frames: zero-mean SAD for every match of the frame (the module docstring)
-    normalise = "mean" if fill and params.subpixel_mean_on_fill else params.subpixel_normalise
+    if params.subpixel_mean_on_noisy_haze:  # hazy frames of a noisy sensor (smoothed pair, no fill-in)
+        from canopy.frontend.stereo_fill import mean_on_noisy_haze  # imports this module
+        noisy_haze = mean_on_noisy_haze(left, params, left_img, noise_sigma)
+    # the fill-in's frames (and hazy noisy ones): zero-mean SAD for every match of the frame (the module docstring)
+    mean = (fill and params.subpixel_mean_on_fill) or noisy_haze
+    normalise = "mean" if mean else params.subpixel_normalise
     ref_left, ref_right, _ = refinement_pair(left_img, right_img, params, left.robust_noise_sigma)
     li, ur, disp = refine_and_accept(ref_left, ref_right, left, li, right.uv[ri, 0].astype(np.float64),
                                      scale_factors, max_disp, params, noise_sigma, pyramids, normalise)

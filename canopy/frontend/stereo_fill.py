@@ -69,6 +69,31 @@ def _in_band_and_flat(robust: float, low: float, top: float, max_texture: float,
     return mean - robust < max_texture
 
 
+def mean_on_noisy_haze(left: Features, params: TrackingParams, left_img: np.ndarray | None = None,
+                       noise_sigma: float | None = None) -> bool:
+    """True when this frame's stereo refinement gets the zero-mean SAD as a hazy frame of a noisy sensor
+    (``subpixel_mean_on_noisy_haze``): the robust sigma the extractor measured at least
+    ``subpixel_denoise_sigma`` (the pair the refinement runs on is smoothed, and the fill-in's gate,
+    ``stereo_fill_max_sigma``, is shut) and the texture excess below ``stereo_fill_max_texture`` (haze;
+    the noise-only frames keep 2.4-4.1 grey levels of it on KITTI, the hazy ones 0.2-1.9). Frames without
+    a robust sigma (those the enhancement changed) do not.
+
+    Why: the subtracted centre pixel carries the noise that the 2 px Gaussian leaves (about 0.14 x the
+    noisy sensor's white 5-7 grey levels, more where it is not white) into every difference of a patch
+    whose contrast the haze has cut to a few grey levels; the patch mean carries 1/11 of it. KITTI g1-b0.06-high seed 0, every 5th frame,
+    the tracker's stereo matches against the clean pair's SGBM: > 1 px off 25 -> 20 % (< 15 m) and
+    28 -> 21 % (15-30 m). Trajectory over ten noise draws: docs/notes/s24-kittinoisy.md."""
+    if not params.subpixel_mean_on_noisy_haze or params.subpixel_denoise_sigma <= 0:
+        return False
+    sig = left.robust_noise_sigma
+    if sig is None:
+        return False
+    if noise_sigma is None and left_img is None:
+        raise ValueError("mean_on_noisy_haze: the texture test needs noise_sigma or left_img")
+    return _in_band_and_flat(sig, params.subpixel_denoise_sigma, 0.0, params.stereo_fill_max_texture,
+                             left_img, noise_sigma)
+
+
 def sensor_fill_open(sensor_sigma: float | None, params: TrackingParams) -> bool:
     """The fill-in gate of a frame the enhancement changed, by the enhancement's own noise sigma of it
     (``info["noise_sigma"]``: ``estimate_noise`` on the AFE-lifted left image before the denoiser, the
