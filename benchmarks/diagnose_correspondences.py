@@ -23,7 +23,8 @@ view changes): its "physical point" is the foreground surface point its creating
 
 ``--oracle-velocity`` / ``--oracle-stereo`` replace the constant-velocity prediction / every stereo depth
 with the truth (diagnoses, not methods); ``--auto-enhance`` runs each image through ``auto_treat`` first
-(the dark clean presets). docs/notes/s17-darkrows.md has the dark-rows g1-b0.06-high figures.
+(the dark clean presets); ``--pipeline-enhance`` runs each pair through the pipeline's enhancement, with the
+actors' FAST arguments and noise sigma for the tracker (the dim grid cells; docs/notes/s24-dimhaze.md). docs/notes/s17-darkrows.md has the dark-rows g1-b0.06-high figures.
 
     PYTHONPATH=$PWD CANOPY_CACHE_DIR=/work/cache python benchmarks/diagnose_correspondences.py \
         --path /work/cache/degraded/dark-rows-400-g1-b0.06-high-seed0-rendered --max-frames 150 --out /tmp/c.npz
@@ -31,6 +32,7 @@ with the truth (diagnoses, not methods); ``--auto-enhance`` runs each image thro
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from pathlib import Path
 
@@ -164,6 +166,10 @@ def main() -> int:
     ap.add_argument("--auto-enhance", action="store_true",
                     help="each image through canopy.enhance.auto.auto_treat first (per image, not the pipeline's "
                          "pair treatment; for the dark clean presets, whose frames auto enhances)")
+    ap.add_argument("--pipeline-enhance", action="store_true",
+                    help="each pair through the pipeline's enhancement (bench_enhance_diagnose.enhance_pair: the "
+                         "synthetic config's auto, the pair treatment) and the tracker given the actors' FAST "
+                         "arguments and the enhancement's noise sigma (the fill-in gate): the dim grid cells")
     ap.add_argument("--oracle-stereo", action="store_true",
                     help="diagnosis: every stereo depth replaced by the exact (foreground) depth at its keypoint")
     ap.add_argument("--oracle-velocity", action="store_true",
@@ -188,8 +194,6 @@ def main() -> int:
     dd.Tracker = Hooked
     orig_open = dd.open_source
     if args.auto_enhance:
-        import dataclasses
-
         from canopy.enhance.auto import auto_treat
         from canopy.enhance.params import EnhanceParams
         ep = EnhanceParams()
@@ -201,6 +205,28 @@ def main() -> int:
                                                       right=auto_treat(raw(i).right, ep)[0])
             return src
         dd.open_source = open_enhanced
+    enhanced = {}   # frame index -> the tracker's keyword arguments for that enhanced pair
+    if args.pipeline_enhance:
+        from bench_enhance_diagnose import actor_fast, enhance_pair
+        from canopy.config import load_run_config
+        from canopy.enhance import make_enhancer
+        cfg = load_run_config("synthetic")
+        ep = dataclasses.replace(cfg.enhancement, method="auto")
+        enhancer = make_enhancer(ep)
+
+        def open_pipeline(*a, **k):
+            src = orig_open(*a, **k)
+            raw = src.frame
+
+            def frame(i):
+                f = raw(i)
+                le, re, info = enhance_pair(enhancer, f.left, f.right)
+                enhanced[f.index] = dict(actor_fast(ep, info, le, cfg.tracking.n_features),
+                                         sensor_sigma=info["noise_sigma"])
+                return dataclasses.replace(f, left=le, right=re)
+            src.frame = frame
+            return src
+        dd.open_source = open_pipeline
     if args.oracle_stereo:
         fg_cache = {}
 
@@ -226,7 +252,7 @@ def main() -> int:
         if gt_all is not None and frame.index > 0 and getattr(self, "_velocity_valid", False):
             # a diagnosis, not a method: the constant-velocity prediction replaced by the true motion
             self._velocity = se3_inv(gt_all[frame.index - 1]) @ gt_all[frame.index]
-        res = RecordingTracker.track(self, frame, *a, **k)
+        res = RecordingTracker.track(self, frame, *a, **{**enhanced.get(frame.index, {}), **k})
         holder.setdefault("tracker", self)
         state[frame.index] = (self.last_refine, self._last_matched, res)
         return res

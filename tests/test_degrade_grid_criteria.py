@@ -139,3 +139,16 @@ def test_a_peer_pose_that_never_leaves_the_origin_is_not_tracking():
     moving = np.stack([se3_exp(np.r_[0, 0, 0, 0, 0, 0.8 * i]) for i in range(10)])
     moving = np.concatenate([moving, moving[:1] @ se3_exp(np.r_[0, 0, 0, 0, 0, 1e-6])[None]])
     assert not frozen_frames(moving).any() and frozen_frames(np.zeros((0, 4, 4))).shape == (0,)
+
+
+def test_set_is_checked_against_each_datasets_config():
+    """--set is validated, before any run, on the config each requested dataset runs with: the per-level FAST
+    floors' texture gate needs the robust noise gate of the synthetic config, which KITTI's config does not have."""
+    level_gate = ["--set", "tracking.noisy_extractor_level_noise=true",
+                  "--set", "tracking.noisy_extractor_level_noise_max_texture=0.8"]
+    with pytest.raises(SystemExit, match="noisy_extractor_level_noise_max_texture"):
+        grid.main(["--in-process", "--datasets", "kitti", *level_gate])
+    with pytest.raises(SystemExit, match="noisy_extractor_level_noise_max_texture"):
+        grid.main(["--in-process", "--datasets", "day-loop", "kitti", *level_gate])
+    with pytest.raises(SystemExit, match="no_such_field"):
+        grid.main(["--in-process", "--datasets", "day-loop", "--set", "tracking.no_such_field=1"])
