@@ -44,9 +44,10 @@ def test_frame_after_initialisation_is_tracked_by_appearance_matches(noise):
     # the stereo fill-in off (configs/kitti.yaml has it on): with it the low-noise hazy frame 0 gets
     # twice the stereo points, and frame 1 finds its pose by RANSAC without the retry this tests; the
     # same for the uncertain-stereo rule on the noisy pair (frame 0's map keeps no 10 %-uncertain depths,
-    # tests/test_keypoint_uncertainty.py)
+    # tests/test_keypoint_uncertainty.py), and for the zero-mean SAD on the noisy hazy pair (its better depths
+    # let the window matches find the pose too; tests/test_stereo_mean_on_fill.py)
     p = replace(load_run_config("kitti").tracking, parallel_extraction=False, parallel_stereo=False,
-                stereo_fill=False, uncertain_stereo_max_rel_sigma=0.0)
+                stereo_fill=False, uncertain_stereo_max_rel_sigma=0.0, subpixel_mean_on_noisy_haze=False)
     results = {}
     for retry in (False, True):
         tracker = Tracker(src.calibration, replace(p, appearance_retry=retry))
