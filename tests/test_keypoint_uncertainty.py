@@ -173,8 +173,10 @@ def test_without_uncertain_depths_the_frame_after_initialisation_needs_no_retry(
         ray_r = ray_length(depth_from_stereo(f.left, f.right, src.calibration, view="right"), src.calibration)
         frames.append(StereoFrame(f.index, f.timestamp, degrade_image(f.left, cell, ray_l, rng=2 * i),
                                   degrade_image(f.right, cell, ray_r, rng=2 * i + 1)))
+    # the zero-mean SAD on noisy haze off too (on in configs/kitti.yaml since s24): its better depths let frame 1
+    # find its pose with the uncertain depths kept, which is not what this test is about
     p = replace(load_run_config("kitti").tracking, parallel_extraction=False, parallel_stereo=False,
-                stereo_fill=False, appearance_retry=False)
+                stereo_fill=False, appearance_retry=False, subpixel_mean_on_noisy_haze=False)
     status = {}
     for tau in (0.0, 0.1):
         tracker = Tracker(src.calibration, replace(p, uncertain_stereo_max_rel_sigma=tau))

@@ -34,7 +34,9 @@ KITTI = Path(__file__).resolve().parents[1] / "data" / "kitti06_snippet"
 
 
 def _params(**kw):
-    return replace(load_run_config("kitti").tracking, parallel_extraction=False, **kw)
+    """configs/kitti.yaml's tracking settings with the noisy-haze SAD off unless asked for (the tests compare it)."""
+    return replace(load_run_config("kitti").tracking, parallel_extraction=False,
+                   **{"subpixel_mean_on_noisy_haze": False, **kw})
 
 
 def _pair(frame_index: int, beta: float, noise: str | None = "low"):
@@ -105,11 +107,12 @@ def test_pairs_outside_the_gate_keep_their_matches(switch, noise):
     np.testing.assert_array_equal(same.depth, base.depth)
 
 
-def test_noisy_haze_switch_off_by_default_and_in_every_config():
-    """KITTI g1-b0.06-high: better on 10 of 15 noise draws, worse on 5, seed 1 of the judged three among them
-    (docs/notes/s24-kittinoisy.md): off everywhere."""
+def test_noisy_haze_switch_off_by_default_and_on_for_kitti_only():
+    """KITTI g1-b0.06-high: better on 10 of 15 noise draws, worse on 5, median 72.8 -> 59.8 mm
+    (docs/notes/s24-kittinoisy.md, s24-lead.md): on in configs/kitti.yaml, measured nowhere else."""
     assert TrackingParams().subpixel_mean_on_noisy_haze is False
-    for name in ("kitti", "euroc", "synthetic"):
+    assert load_run_config("kitti").tracking.subpixel_mean_on_noisy_haze is True
+    for name in ("euroc", "synthetic"):
         assert load_run_config(name).tracking.subpixel_mean_on_noisy_haze is False
 
 

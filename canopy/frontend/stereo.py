@@ -25,7 +25,7 @@ per-match depth is 3x better on every gated cell, the trajectories better or wor
 (docs/notes/s21-hazedepth.md). On in configs/kitti.yaml since s23: on KITTI's lit hazy low-noise cells the
 centre SAD leaves the path 0.17-0.45 % short and the mean brings the scale closer to 1 on all 5 draws
 measured (ATE better on 6 of 8 cell-draws, mean 63.4 -> 44.4 mm; docs/notes/s23-lead.md).
-``subpixel_mean_on_noisy_haze`` (s24, off) opens it on the hazy frames of a noisy sensor too, whose pair the
+``subpixel_mean_on_noisy_haze`` (s24; on in configs/kitti.yaml) opens it on the hazy frames of a noisy sensor too, whose pair the
 refinement smooths (``stereo_fill.mean_on_noisy_haze``; docs/notes/s24-kittinoisy.md).
 All steps are batched numpy (candidate pairs via row bands, one loop over pyramid levels).
 """

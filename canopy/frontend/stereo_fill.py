@@ -82,7 +82,7 @@ def mean_on_noisy_haze(left: Features, params: TrackingParams, left_img: np.ndar
     noisy sensor's white 5-7 grey levels, more where it is not white) into every difference of a patch
     whose contrast the haze has cut to a few grey levels; the patch mean carries 1/11 of it. KITTI g1-b0.06-high seed 0, every 5th frame,
     the tracker's stereo matches against the clean pair's SGBM: > 1 px off 25 -> 20 % (< 15 m) and
-    28 -> 21 % (15-30 m). Trajectory over ten noise draws: docs/notes/s24-kittinoisy.md."""
+    28 -> 21 % (15-30 m). Trajectory over fifteen noise draws: docs/notes/s24-kittinoisy.md, s24-lead.md."""
     if not params.subpixel_mean_on_noisy_haze or params.subpixel_denoise_sigma <= 0:
         return False
     sig = left.robust_noise_sigma
