@@ -370,7 +370,7 @@ class TrackingParams:
     # s24-kittinoisy: zero-mean SAD also on hazy frames of the noisy sensor, whose pair the refinement smooths
     # (robust sigma >= subpixel_denoise_sigma) and whose texture excess is below stereo_fill_max_texture (> 0
     # needed: noise alone keeps its texture); the fill-in's gate is shut there (stereo_fill_max_sigma)
-    # (canopy.frontend.stereo_fill.mean_on_noisy_haze). False: off (docs/notes/s24-kittinoisy.md).
+    # (canopy.frontend.stereo_fill.mean_on_noisy_haze). False: off; on in configs/kitti.yaml (docs/notes/s24-kittinoisy.md).
     subpixel_mean_on_noisy_haze: bool = False
     # Stereo points whose disparity the image cannot pin (canopy.frontend.keypoint_uncertainty; issue 9's
     # haze + noisy sensor): on frames whose robust noise sigma is >= uncertain_stereo_min_noise, a stereo
