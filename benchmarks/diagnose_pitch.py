@@ -75,8 +75,14 @@ class RecTracker(Tracker):
                           inl=est.inliers.copy())
         return est
 
+    oracle_up = None   # (frames, 3) the generator's up in each camera frame (--oracle-up)
+    oracle_sigma_deg = float("nan")
+
     def _make_keyframe(self, frame, feats, stereo, T_wc, matched_ids, **k):
         kf = super()._make_keyframe(frame, feats, stereo, T_wc, matched_ids, **k)
+        if self.oracle_up is not None:   # the exact vertical as the keyframe's measured up
+            kf.up_cam = self.oracle_up[frame.index].copy()
+            kf.up_sigma_deg = self.oracle_sigma_deg
         for i in np.flatnonzero(kf.new_landmark_ids >= 0):
             self.created[int(kf.new_landmark_ids[i])] = (frame.index, float(feats.uv[i, 0]), float(feats.uv[i, 1]))
         return kf
@@ -109,6 +115,10 @@ def main() -> int:
     ap.add_argument("--set", action="append", default=[])
     ap.add_argument("--far", type=float, default=8.0, help="m: near / far split of the counterfactuals")
     ap.add_argument("--out", default=None)
+    ap.add_argument("--oracle-up", type=float, default=None, metavar="SIGMA_DEG",
+                    help="hand every keyframe the generator's exact up (world z in the camera frame) with this "
+                         "sigma and turn mapping.attitude_prior on (docs/notes/s25-attitude.md)")
+    ap.add_argument("--no-counterfactuals", action="store_true", help="keyframe rotation errors only")
     args = ap.parse_args()
     sets = [parse_setting(s) for s in args.set]
     holder = {}
@@ -124,6 +134,13 @@ def main() -> int:
             holder["mapper"] = self
 
     bed.Tracker, bed.LocalMapper = T_, M_
+    if args.oracle_up is not None:
+        from canopy.sources import open_source
+        gt_all = open_source("euroc", args.clean, max_frames=args.max_frames).ground_truth.poses
+        # the generator's world is z up (canopy/synthetic/trajectories.py): up_cam = R_world_cam^T e_z
+        T_.oracle_up = np.array([g[:3, :3].T @ np.array([0.0, 0.0, 1.0]) for g in gt_all])
+        T_.oracle_sigma_deg = args.oracle_up
+        sets.append(("mapping", "attitude_prior", True))
     out, _ = bed.run(args.path, args.clean, "synthetic", {}, {f: v for s, f, v in sets if s == "tracking"},
                      args.max_frames, stereo=False, kind="euroc",
                      map_sets={f: v for s, f, v in sets if s == "mapping"})
@@ -164,6 +181,8 @@ def main() -> int:
               f"negative {100 * np.mean(incs[:, col] < 0):.0f} %")
     print(f"  (first keyframe's error {rows[0, 7]:+.3f} {rows[0, 8]:+.3f} {rows[0, 9]:+.3f})")
 
+    if args.no_counterfactuals:
+        return 0
     # --- 2. per-frame counterfactual refinements from the true pose
     dfiles = sorted((Path(args.clean) / "mav0" / "depth0" / "data").iterdir())
     cache = {}

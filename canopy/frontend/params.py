@@ -386,6 +386,11 @@ class TrackingParams:
     # ... the bound with the noise as the octave's resampled window carries it (4/9 of white at octaves
     # >= 1; keypoint_uncertainty.sampled_noise_factors, docs/notes/s17-kittihaze.md). False: white.
     uncertain_stereo_sampled_noise: bool = False
+    # s25-attitude: each keyframe's up measured from its vertical segments (canopy.lines.vertical, through
+    # canopy.frontend.tracker_vertical) rides on the KeyframeData for mapping.attitude_prior; estimates whose
+    # sigma is above vertical_max_sigma_deg are not sent. False: no measurement (docs/notes/s25-attitude.md).
+    vertical_estimate: bool = False
+    vertical_max_sigma_deg: float = 2.0
 
     def disparity_offset_for(self, extractor: str) -> float:
         """The calibrated disparity offset for keypoints found by ``extractor`` (Features.extractor)."""
