@@ -1,0 +1,191 @@
+"""The scene's "up" in one image, from the vanishing direction of its vertical line segments.
+
+Idea (the classic vanishing-point geometry, e.g. Hartley & Zisserman 2nd ed. §8.6; Collins & Weiss 1990;
+Bazin et al. 2012 on the Gaussian sphere): a segment with endpoints p1, p2 (pixels) and the camera centre span its
+*interpretation plane*, with unit normal n = (K⁻¹p̃1 × K⁻¹p̃2)/‖·‖. The 3-D line lies in that plane, so its
+direction d satisfies n·d = 0. Every world-vertical edge (tree trunks and posts in the generated orchard; poles
+and building edges on KITTI) shares the direction "up", so up is the common null direction of their normals:
+two of them give a hypothesis v = n_i × n_j, all of them the smallest eigenvector of Σ wᵢ nᵢnᵢᵀ.
+
+Here (our own code): segments from ``canopy.lines.features.detect_segments``; the candidates are the segments
+whose interpretation plane passes within ``max_prior_deg`` of the predicted up (the tracker's pose) or, without a
+prediction, within ``upright_gate_deg`` of −y (a roughly upright camera); a deterministic RANSAC enumerates the
+pairs of the longest candidates and scores each hypothesis by the length of the candidates it explains
+(residual |asin(nᵢ·v)| < ``inlier_deg``); the winner is refined by the length-weighted eigenvector, with inliers
+re-selected a few times; the sign makes y < 0 (camera y points down).
+
+Sigma: weighted least squares with residual variance c/wᵢ; c is estimated from the inliers' residuals
+(Σ wᵢrᵢ²/(N−2)) and the tangent-plane information is M/c with M = Σ wᵢ nᵢnᵢᵀ restricted to the plane ⟂ v (its two
+larger eigenvalues λ₂ ≤ λ₃). ``sigma_deg`` is the worse axis, √(c/λ₂), times ``sigma_scale`` and never below
+``sigma_floor_deg`` (the residuals of one trunk's edges are not independent, and the renderer's / rectification's
+systematic errors are not in the spread): both measured in docs/notes/s25-vertical.md.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from canopy.lines.features import detect_segments, segment_lengths
+from canopy.lines.params import LineParams
+from shared.errors import ConfigError, InputError
+
+UPRIGHT_UP_CAM = np.array([0.0, -1.0, 0.0])  # camera x right, y down, z forward
+
+
+@dataclass(frozen=True)
+class VerticalEstimate:
+    up_cam: np.ndarray   # (3,) unit vector: the scene's "up" in the camera frame (x right, y down, z forward), y < 0
+    sigma_deg: float     # angular 1-sigma of up_cam
+    n_inliers: int       # segments that agree with it
+
+
+@dataclass(frozen=True)
+class VerticalParams:
+    # the search window: the interpretation plane of a candidate passes within this angle of the predicted up
+    max_prior_deg: float = 5.0
+    upright_gate_deg: float = 30.0       # without a prediction: up within this of -y (an upright camera)
+    inlier_deg: float = 0.5              # |asin(n·v)| of an inlier
+    ransac_segments: int = 24            # RANSAC pairs among the longest candidates (24 -> 276 hypotheses)
+    refine_iterations: int = 3           # eigenvector refinement, inliers re-selected each time
+    min_inliers: int = 4
+    max_sigma_deg: float = 2.0           # a worse estimate is None
+    sigma_scale: float = 1.0             # measured calibration of the statistical sigma
+    sigma_floor_deg: float = 0.05
+    min_pair_angle_deg: float = 2.0      # two planes closer than this do not define a direction
+    # segment detection (canopy.lines.features; FLD, 2 % of the diagonal as the line features' default)
+    detector: str = "fld"
+    min_length_fraction: float = 0.02
+    max_lines: int = 300
+    line_params: LineParams = field(init=False, repr=False, compare=False)
+
+    def validate(self) -> "VerticalParams":
+        def need(ok: bool, name: str, what: str) -> None:
+            if not ok:
+                raise ConfigError("VerticalParams", f"{name} {what} (got {getattr(self, name)!r})")
+
+        need(0 < self.max_prior_deg < 90, "max_prior_deg", "must be in (0, 90)")
+        need(0 < self.upright_gate_deg < 90, "upright_gate_deg", "must be in (0, 90)")
+        need(0 < self.inlier_deg < 30, "inlier_deg", "must be in (0, 30)")
+        need(self.ransac_segments >= 2, "ransac_segments", "must be >= 2")
+        need(self.refine_iterations >= 1, "refine_iterations", "must be >= 1")
+        need(self.min_inliers >= 3, "min_inliers", "must be >= 3 (two give a direction with no check)")
+        need(self.max_sigma_deg > 0, "max_sigma_deg", "must be > 0")
+        need(self.sigma_scale > 0, "sigma_scale", "must be > 0")
+        need(self.sigma_floor_deg >= 0, "sigma_floor_deg", "must be >= 0")
+        need(0 < self.min_pair_angle_deg < 90, "min_pair_angle_deg", "must be in (0, 90)")
+        return self
+
+    def __post_init__(self):
+        self.validate()
+        # LineParams checks the detector fields (detector name, length fraction, max_lines)
+        object.__setattr__(self, "line_params", LineParams(detector=self.detector,
+                                                           min_length_fraction=self.min_length_fraction,
+                                                           max_lines=self.max_lines))
+
+
+def _check_K(K) -> np.ndarray:
+    K = np.asarray(K, np.float64) if K is not None else None
+    if K is None or K.shape != (3, 3) or not np.isfinite(K).all():
+        raise InputError("estimate_vertical", f"K must be a finite 3x3 matrix, got {None if K is None else K.shape}")
+    if K[0, 0] <= 0 or K[1, 1] <= 0 or abs(K[2, 2] - 1.0) > 1e-9 or np.any(K[2, :2] != 0) or K[1, 0] != 0:
+        raise InputError("estimate_vertical", "K must be an upper-triangular pinhole matrix with fx, fy > 0 and "
+                         f"K[2] = (0, 0, 1), got {K.tolist()}")
+    return K
+
+
+def _unit_prior(prior_up_cam) -> np.ndarray:
+    v = np.asarray(prior_up_cam, np.float64).reshape(-1)
+    n = np.linalg.norm(v) if v.shape == (3,) else 0.0
+    if v.shape != (3,) or not np.isfinite(v).all() or n < 1e-9:
+        raise InputError("estimate_vertical", f"prior_up_cam must be a finite non-zero 3-vector, got {prior_up_cam!r}")
+    return v / n
+
+
+def interpretation_normals(segs: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """(N,3) unit normals of the planes through the camera centre and each segment (rows x1, y1, x2, y2)."""
+    s = np.asarray(segs, np.float64).reshape(-1, 4)
+    Kinv = np.linalg.inv(K)
+    ones = np.ones((len(s), 1))
+    r1 = np.hstack([s[:, 0:2], ones]) @ Kinv.T
+    r2 = np.hstack([s[:, 2:4], ones]) @ Kinv.T
+    n = np.cross(r1, r2)
+    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+
+
+def _weighted_null_direction(normals: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(v, eigenvalues ascending, eigenvectors) of M = Σ wᵢ nᵢnᵢᵀ; v the smallest eigenvector."""
+    M = (normals * w[:, None]).T @ normals
+    lam, vec = np.linalg.eigh(M)
+    return vec[:, 0], lam, vec
+
+
+def estimate_vertical_from_segments(segs: np.ndarray, K: np.ndarray, prior_up_cam: np.ndarray | None = None,
+                                    params: VerticalParams | None = None) -> VerticalEstimate | None:
+    """``estimate_vertical`` on given segments ((N,4) pixel endpoints), e.g. those the tracker already found."""
+    p = params or VerticalParams()
+    K = _check_K(K)
+    v0 = UPRIGHT_UP_CAM if prior_up_cam is None else _unit_prior(prior_up_cam)
+    gate = np.radians(p.max_prior_deg if prior_up_cam is not None else p.upright_gate_deg)
+    segs = np.asarray(segs, np.float64).reshape(-1, 4)
+    if len(segs) < p.min_inliers:
+        return None
+    normals = interpretation_normals(segs, K)
+    lengths = segment_lengths(segs)
+    # candidates: the plane passes within the gate of the predicted up (|n·v0| = sin of v0's angle off the plane)
+    cand = np.abs(normals @ v0) < np.sin(gate)
+    if cand.sum() < p.min_inliers:
+        return None
+    n_c, w_c = normals[cand], lengths[cand]
+    sin_inlier = np.sin(np.radians(p.inlier_deg))
+
+    # deterministic RANSAC: every pair of the longest candidates (detect_segments sorts longest first)
+    top = np.argsort(-w_c, kind="stable")[: p.ransac_segments]
+    i, j = np.triu_indices(len(top), 1)
+    hyp = np.cross(n_c[top[i]], n_c[top[j]])
+    norm = np.linalg.norm(hyp, axis=1)
+    ok = norm > np.sin(np.radians(p.min_pair_angle_deg))
+    hyp = hyp[ok] / norm[ok, None]
+    hyp *= np.sign(hyp @ v0)[:, None]  # the sign towards the prediction
+    hyp = hyp[hyp @ v0 > np.cos(gate)]
+    if len(hyp) == 0:
+        return None
+    explained = np.abs(n_c @ hyp.T) < sin_inlier          # (candidates, hypotheses)
+    score = w_c @ explained
+    v = hyp[int(np.argmax(score))]
+
+    inl = None
+    for _ in range(p.refine_iterations):
+        inl_new = np.abs(n_c @ v) < sin_inlier
+        if inl_new.sum() < p.min_inliers:
+            return None
+        if inl is not None and np.array_equal(inl_new, inl):
+            break
+        inl = inl_new
+        v_new, lam, vec = _weighted_null_direction(n_c[inl], w_c[inl])
+        v = v_new * (1.0 if v_new @ v0 >= 0 else -1.0)
+    if v @ v0 < np.cos(gate):
+        return None
+    n_in, w_in = n_c[inl], w_c[inl]
+    _, lam, _ = _weighted_null_direction(n_in, w_in)
+    n = int(inl.sum())
+    r = n_in @ v
+    c = float(w_in @ (r * r)) / max(n - 2, 1)
+    lam_tangent = float(lam[1])  # the smaller of the two eigenvalues orthogonal to v
+    if lam_tangent <= 0:
+        return None
+    sigma = np.degrees(np.sqrt(c / lam_tangent)) * p.sigma_scale
+    sigma = max(float(sigma), p.sigma_floor_deg)
+    if not np.isfinite(sigma) or sigma > p.max_sigma_deg:
+        return None
+    up = v if v[1] < 0 else -v
+    return VerticalEstimate(up_cam=up, sigma_deg=sigma, n_inliers=n)
+
+
+def estimate_vertical(image: np.ndarray, K: np.ndarray, prior_up_cam: np.ndarray | None = None,
+                      params: "VerticalParams | None" = None) -> VerticalEstimate | None:
+    """None when the image holds too little vertical structure to tell."""
+    p = params or VerticalParams()
+    K = _check_K(K)
+    segs, _ = detect_segments(image, p.line_params)  # raises InputError on a bad image
+    return estimate_vertical_from_segments(segs, K, prior_up_cam, p)
