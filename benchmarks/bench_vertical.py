@@ -41,8 +41,7 @@ from benchmarks.bench_degrade_grid import PRESETS, cell_haze_depth, degraded_cel
 from canopy.config import load_run_config, parse_value  # noqa: E402
 from canopy.degrade import grid_cells  # noqa: E402
 from canopy.enhance import make_enhancer  # noqa: E402
-from canopy.lines.features import detect_segments  # noqa: E402
-from canopy.lines.vertical import VerticalParams, estimate_vertical_from_segments  # noqa: E402
+from canopy.lines.vertical import VerticalParams, detect_vertical_candidates, estimate_vertical_from_segments  # noqa: E402,E501
 from canopy.report import write_json  # noqa: E402
 from canopy.sources import open_source  # noqa: E402
 
@@ -118,6 +117,16 @@ def summarise(est: list, truth_up: np.ndarray, R_wc: np.ndarray, times: list) ->
                pitch_in_2sigma=float(np.mean(np.abs(d[:, 0]) <= 2 * sig)),
                roll_in_1sigma=float(np.mean(np.abs(d[:, 1]) <= sig)),
                err_over_sigma_p50=float(np.median(err / sig)))
+    # can a prior average it down? pitch errors' correlation between frames k apart, and the pitch error of the
+    # mean over blocks of 30 consecutive frames (what a prior sees at the drift's low frequencies)
+    pitch = np.full(len(est), np.nan)
+    pitch[got] = d[:, 0]
+    for lag in (1, 5, 20):
+        a, b = pitch[:-lag], pitch[lag:]
+        both = np.isfinite(a) & np.isfinite(b)
+        out[f"pitch_corr_lag{lag}"] = float(np.corrcoef(a[both], b[both])[0, 1]) if both.sum() > 3 else None
+    blocks = [np.nanmean(pitch[k:k + 30]) for k in range(0, len(pitch) - 29, 30) if np.isfinite(pitch[k:k + 30]).any()]
+    out["pitch_block30_abs_p90"] = float(np.percentile(np.abs(blocks), 90)) if blocks else None
     # consistency: the up in the GT world frame should be one direction
     up_w = np.einsum("nij,nj->ni", R_wc[got], up)
     mean = up_w.mean(axis=0)
@@ -155,7 +164,7 @@ def run_cell(spec: str, cache: Path, cells_cache: Path | None, tmp: Path, params
         up_true = R.T @ WORLD_UP.get(dataset, E_Z)
         prior = turned(up_true, prior_offset_deg, rng)
         t0 = time.thread_time()
-        segs, _ = detect_segments(le, params.line_params)
+        segs = detect_vertical_candidates(le, params)
         e = estimate_vertical_from_segments(segs, K, prior, params, image=le)
         times.append(time.thread_time() - t0)
         est_prior.append(e)
@@ -174,7 +183,8 @@ def fmt(v, nd=2):
 
 def print_table(rows: list[dict]) -> None:
     head = (f"{'cell':<34} {'mode':<8} {'share':>5} {'p50':>5} {'p90':>5} {'pit50':>5} {'rol50':>5} {'pbias':>6} "
-            f"{'sig50':>5} {'p≤1σ':>5} {'p≤2σ':>5} {'e/σ':>5} {'spr50':>5} {'spr90':>5} {'ninl':>4} {'ms50':>5}")
+            f"{'sig50':>5} {'p≤1σ':>5} {'p≤2σ':>5} {'e/σ':>5} {'spr50':>5} {'spr90':>5} {'ninl':>4} {'ms50':>5} "
+            f"{'r1':>5} {'r5':>5} {'r20':>5} {'blk30':>5}")
     print(head)
     for r in rows:
         for mode in ("prior", "no_prior"):
@@ -183,7 +193,9 @@ def print_table(rows: list[dict]) -> None:
                   f"{fmt(s.get('pitch_p50'))} {fmt(s.get('roll_p50'))} {fmt(s.get('pitch_bias'), 3):>6} "
                   f"{fmt(s.get('sigma_p50'))} {fmt(s.get('pitch_in_1sigma'))} {fmt(s.get('pitch_in_2sigma'))} "
                   f"{fmt(s.get('err_over_sigma_p50'))} {fmt(s.get('spread_p50'))} {fmt(s.get('spread_p90'))} "
-                  f"{fmt(s.get('n_inliers_p50'), 0):>4} {fmt(s.get('ms_p50'), 1):>5}")
+                  f"{fmt(s.get('n_inliers_p50'), 0):>4} {fmt(s.get('ms_p50'), 1):>5} {fmt(s.get('pitch_corr_lag1')):>5} "
+                  f"{fmt(s.get('pitch_corr_lag5')):>5} {fmt(s.get('pitch_corr_lag20')):>5} "
+                  f"{fmt(s.get('pitch_block30_abs_p90'), 3):>5}")
 
 
 def main(argv=None) -> int:

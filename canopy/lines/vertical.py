@@ -50,16 +50,19 @@ class VerticalParams:
     refine_iterations: int = 3           # eigenvector refinement, inliers re-selected each time
     min_inliers: int = 4
     max_sigma_deg: float = 2.0           # a worse estimate is None
-    sigma_scale: float = 1.0             # measured calibration of the statistical sigma
+    sigma_scale: float = 1.2             # measured: pitch error p50 / 0.674 over sigma p50, 0.9-1.6 per cell (s25 note)
     sigma_floor_deg: float = 0.05
     min_pair_angle_deg: float = 2.0      # two planes closer than this do not define a direction
     # sub-pixel refit of the candidate segments on the image's edge profile (refine_segments_subpixel)
     subpixel: bool = True
     subpixel_samples: int = 24           # profiles across each segment
-    subpixel_reach_px: float = 2.0       # the edge is sought within this of the detected line
+    subpixel_reach_px: float = 3.0       # the edge is sought within this of the detected line
     # segment detection (canopy.lines.features; FLD, 2 % of the diagonal as the line features' default)
+    # on the image shrunk by this factor (1 or 2; INTER_AREA): FLD's Canny is most of the time; the sub-pixel refit
+    # then runs on the full image (its reach must cover the shrunk detection's ~1 px error)
+    detect_downscale: int = 2
     detector: str = "fld"
-    min_length_fraction: float = 0.02
+    min_length_fraction: float = 0.04
     max_lines: int = 300
     line_params: LineParams = field(init=False, repr=False, compare=False)
 
@@ -80,6 +83,7 @@ class VerticalParams:
         need(0 < self.min_pair_angle_deg < 90, "min_pair_angle_deg", "must be in (0, 90)")
         need(self.subpixel_samples >= 4, "subpixel_samples", "must be >= 4")
         need(0.5 <= self.subpixel_reach_px <= 8, "subpixel_reach_px", "must be in [0.5, 8]")
+        need(self.detect_downscale in (1, 2), "detect_downscale", "must be 1 or 2")
         return self
 
     def __post_init__(self):
@@ -264,10 +268,24 @@ def estimate_vertical_from_segments(segs: np.ndarray, K: np.ndarray, prior_up_ca
     return VerticalEstimate(up_cam=up, sigma_deg=sigma, n_inliers=n)
 
 
+def detect_vertical_candidates(image: np.ndarray, params: VerticalParams) -> np.ndarray:
+    """Segments (N,4) in full-image pixels, detected at ``params.detect_downscale``; raises InputError on a bad
+    image (``detect_segments``' checks)."""
+    if params.detect_downscale == 1 or image is None or not isinstance(image, np.ndarray) or image.ndim != 2 \
+            or image.dtype != np.uint8:
+        return detect_segments(image, params.line_params)[0]
+    import cv2
+
+    f = params.detect_downscale
+    small = cv2.resize(image, (image.shape[1] // f, image.shape[0] // f), interpolation=cv2.INTER_AREA)
+    segs, _ = detect_segments(small, params.line_params)
+    return (segs.astype(np.float64) + 0.5) * f - 0.5  # pixel centres of the shrunk image in the full one
+
+
 def estimate_vertical(image: np.ndarray, K: np.ndarray, prior_up_cam: np.ndarray | None = None,
                       params: "VerticalParams | None" = None) -> VerticalEstimate | None:
     """None when the image holds too little vertical structure to tell."""
     p = params or VerticalParams()
     K = _check_K(K)
-    segs, _ = detect_segments(image, p.line_params)  # raises InputError on a bad image
+    segs = detect_vertical_candidates(image, p)
     return estimate_vertical_from_segments(segs, K, prior_up_cam, p, image=image)
