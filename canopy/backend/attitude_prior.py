@@ -144,3 +144,30 @@ def attitude_factors(pose_keys: list[int], priors: AttitudePriors) -> list:
     ref = gtsam.Unit3(np.asarray(priors.up_world, float))
     return [gtsam.AttitudeFactorPose3(key, ref, gtsam.noiseModel.Isotropic.Sigma(2, float(s)), gtsam.Unit3(u))
             for key, u, s in zip(pose_keys, priors.up_cam, priors.sigma)]
+
+
+class AttitudePoseTerm:
+    """The same prior on one pose in the tracker's motion-only refinement (``canopy.frontend.pose.refine_pose``'s
+    ``extra`` terms): a pseudo-measurement, no kernel, no inlier set, no information added to the pose's."""
+
+    def __init__(self, up_cam: np.ndarray, up_world: np.ndarray, sigma_rad: float):
+        self.up_cam = np.asarray(up_cam, float).reshape(1, 3) / np.linalg.norm(up_cam)
+        self.up_world = np.asarray(up_world, float).reshape(3)
+        self.weight = 1.0 / float(sigma_rad) ** 2
+        self.basis = tangent_basis(self.up_cam)
+
+    def start_round(self) -> int:
+        return 0   # a prior: it does not count toward the 6 residuals a pose needs
+
+    def normal_equations(self, T_cw: np.ndarray, robust: bool) -> tuple[np.ndarray, np.ndarray]:
+        r, J = attitude_residuals(T_cw[None, :3, :3], self.up_cam, self.up_world, self.basis)
+        H, g = np.zeros((6, 6)), np.zeros(6)
+        H[:3, :3] = self.weight * J[0].T @ J[0]
+        g[:3] = -self.weight * J[0].T @ r[0]
+        return H, g
+
+    def classify(self, T_cw: np.ndarray) -> None:
+        pass
+
+    def information(self, T_cw: np.ndarray) -> np.ndarray:
+        return np.zeros((6, 6))

@@ -391,6 +391,10 @@ class TrackingParams:
     # sigma is above vertical_max_sigma_deg are not sent. False: no measurement (docs/notes/s25-attitude.md).
     vertical_estimate: bool = False
     vertical_max_sigma_deg: float = 2.0
+    # ... and every tracked frame's up (the same estimator, gated by the predicted pose; ~2.5 ms a frame) as a
+    # prior on its pitch and roll in the motion-only refinement, against the reference of the map segment's
+    # first measured keyframe (canopy.frontend.tracker_vertical). False: off.
+    vertical_track_prior: bool = False
 
     def disparity_offset_for(self, extractor: str) -> float:
         """The calibrated disparity offset for keypoints found by ``extractor`` (Features.extractor)."""
