@@ -395,6 +395,8 @@ class TrackingParams:
     # prior on its pitch and roll in the motion-only refinement, against the reference of the map segment's
     # first measured keyframe (canopy.frontend.tracker_vertical). False: off.
     vertical_track_prior: bool = False
+    # the estimator's sigma times this, in the keyframes' up_sigma_deg and the frames' term (1: as measured)
+    vertical_sigma_scale: float = 1.0
 
     def disparity_offset_for(self, extractor: str) -> float:
         """The calibrated disparity offset for keypoints found by ``extractor`` (Features.extractor)."""

@@ -20,9 +20,10 @@ from canopy.frontend.geometry import se3_inv
 class KeyframeVertical:
     """Measures the up of keyframes and keeps the map segment's reference for the search gate."""
 
-    def __init__(self, calib, max_sigma_deg: float):
+    def __init__(self, calib, max_sigma_deg: float, sigma_scale: float = 1.0):
         self.K = calib.K
         self.max_sigma_deg = float(max_sigma_deg)
+        self.sigma_scale = float(sigma_scale)   # applied after the max_sigma_deg test
         self.up_world: np.ndarray | None = None
         self._last: tuple[int, np.ndarray, float] | None = None   # (frame index, up, sigma) of the last measurement
 
@@ -43,7 +44,8 @@ class KeyframeVertical:
         if est is None or not est.sigma_deg <= self.max_sigma_deg:
             up, sigma = np.full(3, np.nan), float("nan")
         else:
-            up, sigma = np.asarray(est.up_cam, float) / np.linalg.norm(est.up_cam), float(est.sigma_deg)
+            up = np.asarray(est.up_cam, float) / np.linalg.norm(est.up_cam)
+            sigma = float(est.sigma_deg) * self.sigma_scale
             if self.up_world is None:
                 self.up_world = R_wc @ up
         self._last = (index, up, sigma)
@@ -98,7 +100,8 @@ def keyframe_vertical(tracker) -> KeyframeVertical:
     """The tracker's measurer (made on first use: both switches share it, and with it the segment's reference)."""
     vert = tracker.__dict__.get("_vertical")
     if vert is None:
-        vert = tracker.__dict__["_vertical"] = KeyframeVertical(tracker.calib, tracker.params.vertical_max_sigma_deg)
+        vert = tracker.__dict__["_vertical"] = KeyframeVertical(tracker.calib, tracker.params.vertical_max_sigma_deg,
+                                                                tracker.params.vertical_sigma_scale)
     return vert
 
 
