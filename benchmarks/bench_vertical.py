@@ -23,7 +23,6 @@ far off on the worst cells) and without one (the upright gate). Reported per cel
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import re
 import sys
@@ -41,7 +40,8 @@ from benchmarks.bench_degrade_grid import PRESETS, cell_haze_depth, degraded_cel
 from canopy.config import load_run_config, parse_value  # noqa: E402
 from canopy.degrade import grid_cells  # noqa: E402
 from canopy.enhance import make_enhancer  # noqa: E402
-from canopy.lines.vertical import VerticalParams, detect_vertical_candidates, estimate_vertical_from_segments  # noqa: E402,E501
+from canopy.lines.vertical import (VerticalParams, detect_vertical_candidates,  # noqa: E402
+                                   estimate_vertical_from_segments)
 from canopy.report import write_json  # noqa: E402
 from canopy.sources import open_source  # noqa: E402
 
@@ -193,7 +193,8 @@ def print_table(rows: list[dict]) -> None:
                   f"{fmt(s.get('pitch_p50'))} {fmt(s.get('roll_p50'))} {fmt(s.get('pitch_bias'), 3):>6} "
                   f"{fmt(s.get('sigma_p50'))} {fmt(s.get('pitch_in_1sigma'))} {fmt(s.get('pitch_in_2sigma'))} "
                   f"{fmt(s.get('err_over_sigma_p50'))} {fmt(s.get('spread_p50'))} {fmt(s.get('spread_p90'))} "
-                  f"{fmt(s.get('n_inliers_p50'), 0):>4} {fmt(s.get('ms_p50'), 1):>5} {fmt(s.get('pitch_corr_lag1')):>5} "
+                  f"{fmt(s.get('n_inliers_p50'), 0):>4} {fmt(s.get('ms_p50'), 1):>5} "
+                  f"{fmt(s.get('pitch_corr_lag1')):>5} "
                   f"{fmt(s.get('pitch_corr_lag5')):>5} {fmt(s.get('pitch_corr_lag20')):>5} "
                   f"{fmt(s.get('pitch_block30_abs_p90'), 3):>5}")
 
