@@ -23,7 +23,6 @@ far off on the worst cells) and without one (the upright gate). Reported per cel
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import re
 import sys
@@ -41,7 +40,9 @@ from benchmarks.bench_degrade_grid import PRESETS, cell_haze_depth, degraded_cel
 from canopy.config import load_run_config, parse_value  # noqa: E402
 from canopy.degrade import grid_cells  # noqa: E402
 from canopy.enhance import make_enhancer  # noqa: E402
-from canopy.lines.vertical import VerticalParams, detect_vertical_candidates, estimate_vertical_from_segments  # noqa: E402,E501
+from benchmarks.bench_enhance_diagnose import enhance_pair  # noqa: E402
+from canopy.lines.vertical import (VerticalEstimate, VerticalParams, detect_vertical_candidates,  # noqa: E402
+                                   estimate_vertical_from_segments)
 from canopy.report import write_json  # noqa: E402
 from canopy.sources import open_source  # noqa: E402
 
@@ -139,7 +140,7 @@ def summarise(est: list, truth_up: np.ndarray, R_wc: np.ndarray, times: list) ->
 
 
 def run_cell(spec: str, cache: Path, cells_cache: Path | None, tmp: Path, params: VerticalParams,
-             prior_offset_deg: float, stride: int, max_frames_override) -> dict:
+             prior_offset_deg: float, stride: int, max_frames_override, stereo: bool = False) -> dict:
     dataset, cell, label = parse_cell(spec)
     kind, clean_path = sequence_path(dataset, cache)
     max_frames = max_frames_override or MAX_FRAMES.get(dataset)
@@ -155,9 +156,11 @@ def run_cell(spec: str, cache: Path, cells_cache: Path | None, tmp: Path, params
     frame_idx = (gt.meta or {}).get("frame_indices", range(len(gt.poses)))
     pose_of = dict(zip(frame_idx, gt.poses))  # frames without ground truth are skipped
     rng = np.random.default_rng(0)
-    est_prior, est_free, times, truth, R_wc = [], [], [], [], []
+    est_prior, est_free, est_stereo, times, truth, R_wc = [], [], [], [], [], []
     for i in range(0, len(src), stride):
-        le, _ = enhancer(src.frame(i).left)  # the left image decides the treatment (actors/enhancement.py)
+        fr = src.frame(i)
+        # the left image decides the treatment, the right gets the same (actors/enhancement.py)
+        le, re, _ = enhance_pair(enhancer, fr.left, fr.right) if stereo else (*enhancer(fr.left)[:1], None, None)
         if i not in pose_of:
             continue
         R = pose_of[i][:3, :3]
@@ -169,12 +172,27 @@ def run_cell(spec: str, cache: Path, cells_cache: Path | None, tmp: Path, params
         times.append(time.thread_time() - t0)
         est_prior.append(e)
         est_free.append(estimate_vertical_from_segments(segs, K, None, params, image=le))
+        if stereo:  # the rectified right camera has the left's rotation: the same up, sampled apart
+            est_stereo.append(fuse(e, estimate_vertical_from_segments(detect_vertical_candidates(re, params), K,
+                                                                      prior, params, image=re)))
         truth.append(up_true)
         R_wc.append(R)
     truth_up = np.array(truth)
     R_wc = np.array(R_wc)
-    return {"cell": spec, "dataset": dataset, "label": label, "image": list(src.image_size),
-            "prior": summarise(est_prior, truth_up, R_wc, times), "no_prior": summarise(est_free, truth_up, R_wc, [])}
+    out = {"cell": spec, "dataset": dataset, "label": label, "image": list(src.image_size),
+           "prior": summarise(est_prior, truth_up, R_wc, times), "no_prior": summarise(est_free, truth_up, R_wc, [])}
+    if stereo:
+        out["stereo"] = summarise(est_stereo, truth_up, R_wc, [])
+    return out
+
+
+def fuse(a: VerticalEstimate | None, b: VerticalEstimate | None) -> VerticalEstimate | None:
+    """Inverse-variance mean of two estimates of one up (either may be None); σ as if independent."""
+    if a is None or b is None:
+        return a if b is None else b
+    wa, wb = a.sigma_deg ** -2, b.sigma_deg ** -2
+    v = wa * a.up_cam + wb * b.up_cam
+    return VerticalEstimate(v / np.linalg.norm(v), float((wa + wb) ** -0.5), a.n_inliers + b.n_inliers)
 
 
 def fmt(v, nd=2):
@@ -187,13 +205,16 @@ def print_table(rows: list[dict]) -> None:
             f"{'r1':>5} {'r5':>5} {'r20':>5} {'blk30':>5}")
     print(head)
     for r in rows:
-        for mode in ("prior", "no_prior"):
+        for mode in ("prior", "no_prior", "stereo"):
+            if mode not in r:
+                continue
             s = r[mode]
             print(f"{r['cell']:<34} {mode:<8} {fmt(s['share'])} {fmt(s.get('err_p50'))} {fmt(s.get('err_p90'))} "
                   f"{fmt(s.get('pitch_p50'))} {fmt(s.get('roll_p50'))} {fmt(s.get('pitch_bias'), 3):>6} "
                   f"{fmt(s.get('sigma_p50'))} {fmt(s.get('pitch_in_1sigma'))} {fmt(s.get('pitch_in_2sigma'))} "
                   f"{fmt(s.get('err_over_sigma_p50'))} {fmt(s.get('spread_p50'))} {fmt(s.get('spread_p90'))} "
-                  f"{fmt(s.get('n_inliers_p50'), 0):>4} {fmt(s.get('ms_p50'), 1):>5} {fmt(s.get('pitch_corr_lag1')):>5} "
+                  f"{fmt(s.get('n_inliers_p50'), 0):>4} {fmt(s.get('ms_p50'), 1):>5} "
+                  f"{fmt(s.get('pitch_corr_lag1')):>5} "
                   f"{fmt(s.get('pitch_corr_lag5')):>5} {fmt(s.get('pitch_corr_lag20')):>5} "
                   f"{fmt(s.get('pitch_block30_abs_p90'), 3):>5}")
 
@@ -207,6 +228,8 @@ def main(argv=None) -> int:
     ap.add_argument("--prior-offset-deg", type=float, default=1.0)
     ap.add_argument("--stride", type=int, default=1, help="every n-th frame")
     ap.add_argument("--max-frames", type=int, default=None)
+    ap.add_argument("--stereo", action="store_true", help="also the right image (enhanced as the left), fused with "
+                    "the left's estimate by inverse variance: mode 'stereo' (predicted up)")
     args = ap.parse_args(argv)
     params = VerticalParams(**{k: parse_value(v) for k, v in (s.split("=", 1) for s in args.set)})
     cache = Path(os.environ.get("CANOPY_CACHE_DIR", ROOT / "cache"))
@@ -216,7 +239,7 @@ def main(argv=None) -> int:
         for spec in args.cells:
             start = time.time()
             rows.append(run_cell(spec, cache, cells_cache, Path(tmp), params, args.prior_offset_deg, args.stride,
-                                 args.max_frames))
+                                 args.max_frames, args.stereo))
             print(f"  [{time.time() - start:5.0f} s] {spec}", file=sys.stderr, flush=True)
     print_table(rows)
     if args.out:

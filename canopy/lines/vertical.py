@@ -7,18 +7,23 @@ direction d satisfies n·d = 0. Every world-vertical edge (tree trunks and posts
 and building edges on KITTI) shares the direction "up", so up is the common null direction of their normals:
 two of them give a hypothesis v = n_i × n_j, all of them the smallest eigenvector of Σ wᵢ nᵢnᵢᵀ.
 
-Here (our own code): segments from ``canopy.lines.features.detect_segments``; the candidates are the segments
-whose interpretation plane passes within ``max_prior_deg`` of the predicted up (the tracker's pose) or, without a
-prediction, within ``upright_gate_deg`` of −y (a roughly upright camera); a deterministic RANSAC enumerates the
+Here (our own code): segments from ``canopy.lines.features.detect_segments`` (FLD on the half-size image: Canny is
+most of the cost); the candidates are the segments whose interpretation plane passes within ``max_prior_deg`` of
+the predicted up (the tracker's pose) or, without a prediction, within ``upright_gate_deg`` of −y (a roughly
+upright camera); each candidate is refitted to the sub-pixel position of its edge on the full image
+(``refine_segments_subpixel``: FLD's line sits on Canny's integer edge pixels, and the angle of a near-vertical
+segment is all a vanishing direction is made of — day-loop hazy cell p90 0.79 -> 0.46 deg, s25 note);
+a deterministic RANSAC enumerates the
 pairs of the longest candidates and scores each hypothesis by the length of the candidates it explains
 (residual |asin(nᵢ·v)| < ``inlier_deg``); the winner is refined by the length-weighted eigenvector, with inliers
 re-selected a few times; the sign makes y < 0 (camera y points down).
 
 Sigma: weighted least squares with residual variance c/wᵢ; c is estimated from the inliers' residuals
 (Σ wᵢrᵢ²/(N−2)) and the tangent-plane information is M/c with M = Σ wᵢ nᵢnᵢᵀ restricted to the plane ⟂ v (its two
-larger eigenvalues λ₂ ≤ λ₃). ``sigma_deg`` is the worse axis, √(c/λ₂), times ``sigma_scale`` and never below
-``sigma_floor_deg`` (the residuals of one trunk's edges are not independent, and the renderer's / rectification's
-systematic errors are not in the spread): both measured in docs/notes/s25-vertical.md.
+larger eigenvalues λ₂ ≤ λ₃). ``sigma_deg`` is the worse axis (in practice pitch: a vertical's image angle says
+little about pitch near the image's centre column), √(c/λ₂), times ``sigma_scale`` (measured on the generated
+cells, docs/notes/s25-vertical.md: the residuals of one trunk's two edges are not independent) and never below
+``sigma_floor_deg`` (a guard for a few near-coincident inliers; not binding on the measured cells).
 """
 from __future__ import annotations
 
@@ -57,12 +62,13 @@ class VerticalParams:
     subpixel: bool = True
     subpixel_samples: int = 24           # profiles across each segment
     subpixel_reach_px: float = 3.0       # the edge is sought within this of the detected line
-    # segment detection (canopy.lines.features; FLD, 2 % of the diagonal as the line features' default)
-    # on the image shrunk by this factor (1 or 2; INTER_AREA): FLD's Canny is most of the time; the sub-pixel refit
-    # then runs on the full image (its reach must cover the shrunk detection's ~1 px error)
+    # segment detection (canopy.lines.features) on the image shrunk by ``detect_downscale`` (1 or 2; INTER_AREA):
+    # FLD's Canny is most of the time; the sub-pixel refit then runs on the full image (its reach covers the shrunk
+    # detection's ~1 px error). Measured (s25 note, 752x480): full size with 2 % segments 13 ms on day-loop clean
+    # and p50 0.22 deg; half size with 4 % of its diagonal (36 full-size px) 4.5 ms and p50 0.17 deg
     detect_downscale: int = 2
     detector: str = "fld"
-    min_length_fraction: float = 0.04
+    min_length_fraction: float = 0.04    # of the (shrunk) image's diagonal
     max_lines: int = 300
     line_params: LineParams = field(init=False, repr=False, compare=False)
 
