@@ -67,16 +67,32 @@ class RecTracker(Tracker):
         self.frames[frame.index] = self._last
         return res
 
+    oracle_track_sigma_deg = None   # --oracle-track-up: the exact up in every motion-only refinement too
+
     def _refine(self, T_cw, X, r, feats, stereo, inliers=None, line_obs=None):
-        est = super()._refine(T_cw, X, r, feats, stereo, inliers=inliers, line_obs=line_obs)
+        if self.oracle_track_sigma_deg is not None and self.oracle_up is not None:
+            # the tracker's attitude term (tracking.vertical_track_prior's slot); the world's up: the first
+            # frame's true up (the tracker's world)
+            from canopy.backend.attitude_prior import AttitudePoseTerm
+            self._attitude_term = AttitudePoseTerm(self.oracle_up[self._cur], self.oracle_up[0],
+                                                   np.radians(self.oracle_track_sigma_deg))
+            est = super()._refine(T_cw, X, r, feats, stereo, inliers=inliers, line_obs=line_obs)
+        else:
+            est = super()._refine(T_cw, X, r, feats, stereo, inliers=inliers, line_obs=line_obs)
         obs = self._stereo_obs if stereo is self._stereo_last else stereo
         self._last = dict(X=np.array(X, float), uv=feats.uv[r].astype(float), ur=obs.u_right[r].astype(float),
                           has_r=obs.valid[r].copy(), octave=feats.octave[r].copy(), T=est.T_cam_world.copy(),
                           inl=est.inliers.copy())
         return est
 
+    oracle_up = None   # (frames, 3) the generator's up in each camera frame (--oracle-up)
+    oracle_sigma_deg = float("nan")
+
     def _make_keyframe(self, frame, feats, stereo, T_wc, matched_ids, **k):
         kf = super()._make_keyframe(frame, feats, stereo, T_wc, matched_ids, **k)
+        if self.oracle_up is not None:   # the exact vertical as the keyframe's measured up
+            kf.up_cam = self.oracle_up[frame.index].copy()
+            kf.up_sigma_deg = self.oracle_sigma_deg
         for i in np.flatnonzero(kf.new_landmark_ids >= 0):
             self.created[int(kf.new_landmark_ids[i])] = (frame.index, float(feats.uv[i, 0]), float(feats.uv[i, 1]))
         return kf
@@ -109,6 +125,12 @@ def main() -> int:
     ap.add_argument("--set", action="append", default=[])
     ap.add_argument("--far", type=float, default=8.0, help="m: near / far split of the counterfactuals")
     ap.add_argument("--out", default=None)
+    ap.add_argument("--oracle-up", type=float, default=None, metavar="SIGMA_DEG",
+                    help="hand every keyframe the generator's exact up (world z in the camera frame) with this "
+                         "sigma and turn mapping.attitude_prior on (docs/notes/s25-attitude.md)")
+    ap.add_argument("--oracle-track-up", type=float, default=None, metavar="SIGMA_DEG",
+                    help="with --oracle-up: the exact up also in every frame's motion-only refinement")
+    ap.add_argument("--no-counterfactuals", action="store_true", help="keyframe rotation errors only")
     args = ap.parse_args()
     sets = [parse_setting(s) for s in args.set]
     holder = {}
@@ -124,6 +146,14 @@ def main() -> int:
             holder["mapper"] = self
 
     bed.Tracker, bed.LocalMapper = T_, M_
+    if args.oracle_up is not None:
+        from canopy.sources import open_source
+        gt_all = open_source("euroc", args.clean, max_frames=args.max_frames).ground_truth.poses
+        # the generator's world is z up (canopy/synthetic/trajectories.py): up_cam = R_world_cam^T e_z
+        T_.oracle_up = np.array([g[:3, :3].T @ np.array([0.0, 0.0, 1.0]) for g in gt_all])
+        T_.oracle_sigma_deg = args.oracle_up
+        T_.oracle_track_sigma_deg = args.oracle_track_up
+        sets.append(("mapping", "attitude_prior", True))
     out, _ = bed.run(args.path, args.clean, "synthetic", {}, {f: v for s, f, v in sets if s == "tracking"},
                      args.max_frames, stereo=False, kind="euroc",
                      map_sets={f: v for s, f, v in sets if s == "mapping"})
@@ -163,7 +193,19 @@ def main() -> int:
         print(f"  {name} pitch increments per keyframe: p10 / p50 / p90 {q[0]:+.4f} / {q[1]:+.4f} / {q[2]:+.4f}, "
               f"negative {100 * np.mean(incs[:, col] < 0):.0f} %")
     print(f"  (first keyframe's error {rows[0, 7]:+.3f} {rows[0, 8]:+.3f} {rows[0, 9]:+.3f})")
+    ups = getattr(mp, "attitude", None)
+    if ups is not None and ups.up_cam:   # the measured ups the attitude prior used, against the generator's
+        ks = sorted(ups.up_cam)
+        true_up = np.array([gt[k][:3, :3].T @ np.array([0.0, 0.0, 1.0]) for k in ks])
+        meas = np.array([ups.up_cam[k] for k in ks])
+        ang = np.degrees(np.arccos(np.clip(np.sum(meas * true_up, axis=1), -1, 1)))
+        sig = np.degrees([ups.sigma[k] for k in ks])
+        print(f"  measured up on {len(ks)} of {len(kfs)} keyframes: error p50 / p90 {np.median(ang):.3f} / "
+              f"{np.percentile(ang, 90):.3f} deg, sigma p50 {np.median(sig):.3f} deg, error / sigma p50 "
+              f"{np.median(ang / sig):.2f}")
 
+    if args.no_counterfactuals:
+        return 0
     # --- 2. per-frame counterfactual refinements from the true pose
     dfiles = sorted((Path(args.clean) / "mav0" / "depth0" / "data").iterdir())
     cache = {}

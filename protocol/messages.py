@@ -7,6 +7,7 @@ needs is sent (pySLAM's explicit cross-process messages), never a live map.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import field
 
 import numpy as np
@@ -172,6 +173,11 @@ class KeyframeData:
     # loop corrections tracking had applied when it tracked this keyframe (issue 10): local
     # mapping brings a keyframe tracked before a correction reached tracking up to date
     loop_epoch: int = 0
+    # the scene's up measured in this keyframe's camera frame (x right, y down, z forward; unit), NaN when
+    # none (tracking.vertical_estimate off or too little vertical structure), and its angular 1-sigma (deg):
+    # mapping.attitude_prior's measurement (canopy.backend.attitude_prior)
+    up_cam: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    up_sigma_deg: float = math.nan
 
     def __len__(self) -> int:
         return len(self.uv)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
+from canopy.backend.attitude_prior import attitude_factors
 from canopy.backend.line_factors import (line_custom_factor, line_endpoint_measurements, line_projection_factors,
                                          right_shift)
 from canopy.backend.stereo_ba import StereoEdges, bundle_adjust_points, edge_chi2, projection_chi2
@@ -83,10 +84,14 @@ class LocalBundleAdjustmentMixin:
             l_gated = self._line_edge_chi2(values, l_kf, l_id, l_coef, l_right) > p.line_chi2_gate
             l_out = np.zeros(len(l_kf), bool)
         fixed_noise = gtsam.noiseModel.Isotropic.Sigma(6, p.fixed_pose_sigma)
+        attitude = self._attitude_priors(local)
         for _ in range(p.ba_passes):
             graph = gtsam.NonlinearFactorGraph()
             for k in fixed:
                 graph.add(gtsam.PriorFactorPose3(X(k), gtsam.Pose3(self.keyframes[k].T_world_cam), fixed_noise))
+            if attitude is not None:
+                for f in attitude_factors([X(local[i]) for i in attitude.pose.tolist()], attitude):
+                    graph.add(f)
             for j in np.flatnonzero(active).tolist():
                 if stereo[j]:
                     graph.add(gtsam.GenericStereoFactor3D(
@@ -161,13 +166,15 @@ class LocalBundleAdjustmentMixin:
         huber = np.where(stereo, p.huber_stereo, p.huber_mono)
         thr = np.where(stereo, p.chi2_stereo, p.chi2_mono)
         active = np.ones(len(e_kf), bool)
+        attitude = self._attitude_priors(local)   # local keyframes are poses 0..len(local)-1
         all_edges = StereoEdges(pose_of_edge, point_of_edge, meas, stereo, sigma, huber)
         for _ in range(p.ba_passes):
             a = np.flatnonzero(active)
             edges = StereoEdges(pose_of_edge[a], point_of_edge[a], np.take(meas, a, axis=0), stereo[a], sigma[a], huber[a])
             final = []
             T_cw, X, _ = bundle_adjust_points(T_cw, len(local), X, edges, self.calib, p.ba_iterations,
-                                              final_projection=final, relative_tol=p.ba_relative_tol)
+                                              final_projection=final, relative_tol=p.ba_relative_tol,
+                                              attitude=attitude)
             # the last pass's test is at the final estimate: it also decides the write-back below.
             # When the pass had every edge, LM's own projection at its result is that of all_edges
             # (same arrays, per-edge arithmetic): no second projection
@@ -188,6 +195,13 @@ class LocalBundleAdjustmentMixin:
         bad = ~active | over
         for j in np.flatnonzero(bad).tolist():
             self._remove_observation(int(e_lm[j]), int(e_kf[j]))
+
+    def _attitude_priors(self, local: list[int]):
+        """The attitude prior terms of the local keyframes (mapping.attitude_prior; None when off or none)."""
+        store = getattr(self, "attitude", None)
+        if not self.params.attitude_prior or store is None:
+            return None
+        return store.priors(local)
 
     # ----------------------------------------------------------------- line terms (Eq. 10)
     def _line_edges(self, local: list[int], kf_set: set[int]):

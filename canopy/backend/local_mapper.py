@@ -21,6 +21,7 @@ from operator import attrgetter
 import gtsam
 import numpy as np
 
+from canopy.backend.attitude_prior import AttitudeStore
 from canopy.backend.keyframe_culling import cull_redundant_keyframes
 from canopy.backend.local_ba import LocalBundleAdjustmentMixin
 from canopy.backend.map_store import Keyframe, Landmark, LandmarkStore, LineLandmark, MapStoreAccess, _sorted_unique_ids, \
@@ -95,6 +96,8 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         # two keyframes, LoopClosing::ComputeSim3 / KeyFrame::AddLoopEdge)
         self.loop_keyframes: set[int] = set()
         self._insert_table: ObservationTable | None = None   # _insert's, taken by insert_keyframe
+        # measured ups of the keyframes (mapping.attitude_prior; canopy.backend.attitude_prior)
+        self.attitude = AttitudeStore(self.params.attitude_reference_keyframes)
 
     # ----------------------------------------------------------------- public API
     def insert_keyframe(self, kf: KeyframeData) -> LocalMapUpdate:
@@ -102,6 +105,8 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         t_all = time.perf_counter()
         t0 = time.perf_counter()
         rec = self._insert(kf)
+        if self.params.attitude_prior:
+            self.attitude.add(rec.index, rec.segment, rec.T_world_cam, kf.up_cam, kf.up_sigma_deg)
         # the observations of rec's landmarks as insertion left them (map_store.ObservationTable): read
         # once for the descriptors, covisibility, the window and BA's edges; nothing changes them in between
         table, self._insert_table = self._insert_table, None

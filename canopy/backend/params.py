@@ -119,6 +119,13 @@ class MappingParams:
     triangulate_confirm: bool = False
     # local BA uses the unconfirmed ones meanwhile (False: confirmed ones only)
     triangulate_confirm_ba: bool = True
+    # --- attitude prior (canopy.backend.attitude_prior; docs/notes/s25-attitude.md) ---------
+    # local BA adds a 2-D prior on the pitch and roll of each local keyframe whose KeyframeData carries a
+    # measured up (up_cam; tracking.vertical_estimate measures it), against the segment's reference: the
+    # sigma-weighted mean of R_world_cam up_cam over its first attitude_reference_keyframes keyframes that
+    # carry one. Off: bit-identical.
+    attitude_prior: bool = False
+    attitude_reference_keyframes: int = 1
 
     def validate(self) -> "MappingParams":
         def need(ok: bool, name: str, what: str) -> None:
@@ -165,6 +172,7 @@ class MappingParams:
         need(self.triangulate_min_observations >= 2, "triangulate_min_observations", "must be >= 2")
         need(self.triangulate_id_base >= 1, "triangulate_id_base", "must be >= 1")
         need(self.triangulate_fuse_neighbours >= 0, "triangulate_fuse_neighbours", "must be >= 0")
+        need(self.attitude_reference_keyframes >= 1, "attitude_reference_keyframes", "must be >= 1")
         return self
 
     def __post_init__(self):

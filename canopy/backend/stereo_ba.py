@@ -24,6 +24,7 @@ import numpy as np
 # StereoEdges is this module's input type (local_ba builds it)
 from canopy.backend.ba_layout import StereoEdges, _Groups, _mv, _Structure, _take, _Work, _work
 from canopy.frontend.geometry import se3_exp
+from canopy.backend.attitude_prior import AttitudePriors
 from shared.types import StereoCalibration
 
 LAMBDA_INITIAL = 1e-5   # GTSAM LevenbergMarquardtParams defaults
@@ -202,9 +203,10 @@ class _Linearised:
     """Normal equations of one linearisation point, eliminated onto the local poses."""
 
     def __init__(self, T_cw, X, edges: StereoEdges, n_local: int, calib: StereoCalibration, st: _Structure,
-                 projected: tuple | None = None):
+                 projected: tuple | None = None, attitude: "AttitudePriors | None" = None):
         """``projected``: ``_project`` of this (T_cw, X) and its ``_robust_cost``, when LM has just
-        computed them to accept the step."""
+        computed them to accept the step. ``attitude``: pose-only prior terms
+        (``canopy.backend.attitude_prior``), added to the cost and the poses' blocks."""
         if projected is None:
             r, Pc, R, front = _project(T_cw, X, edges, calib, st)
             projected = (r, Pc, R, front), _robust_cost(r, front, edges)
@@ -217,6 +219,9 @@ class _Linearised:
         JlT = Jc.transpose(0, 2, 1)
         wl = np.take(w, loc)[:, None, None]
         self.Hcc, self.bc = _pose_blocks(Jc, wl, np.take(Wr, loc, axis=0), st.loc_by_pose, work)
+        if attitude is not None:
+            self.cost += attitude.cost(T_cw)
+            attitude.add_normal_blocks(T_cw, self.Hcc, self.bc)
         m = len(loc)
         Jxw = _take(Jx, loc, work.get("Jxw", (m, 3, 3)))
         np.multiply(Jxw.reshape(m, 9), wl.reshape(m, 1), out=Jxw.reshape(m, 9))  # = take(Jx, loc) * wl
@@ -288,7 +293,8 @@ def _apply(T_cw: np.ndarray, X: np.ndarray, dc: np.ndarray, dp: np.ndarray) -> t
 def bundle_adjust_points(T_cw: np.ndarray, n_local: int, X: np.ndarray, edges: StereoEdges,
                          calib: StereoCalibration, max_iterations: int,
                          final_projection: list | None = None,
-                         relative_tol: float = RELATIVE_ERROR_TOL) -> tuple[np.ndarray, np.ndarray, int]:
+                         relative_tol: float = RELATIVE_ERROR_TOL,
+                         attitude: "AttitudePriors | None" = None) -> tuple[np.ndarray, np.ndarray, int]:
     """Levenberg-Marquardt on the local poses ``T_cw[:n_local]`` and all points ``X``; the poses
     ``T_cw[n_local:]`` stay fixed. Returns (T_cw, X, iterations).
 
@@ -296,14 +302,15 @@ def bundle_adjust_points(T_cw: np.ndarray, n_local: int, X: np.ndarray, edges: S
     the returned estimate are appended, ``(r, Pc)`` as ``_project`` gives them. LM has made that
     projection already (to accept its last step), so the caller's outlier test after BA
     (``projection_chi2``) needs no second one (issue 8: ~1 ms per KITTI BA call).
-    ``relative_tol``: LM stops once an accepted step lowers the cost by less than this fraction."""
+    ``relative_tol``: LM stops once an accepted step lowers the cost by less than this fraction.
+    ``attitude``: prior terms on the local poses' pitch and roll (``canopy.backend.attitude_prior``)."""
     T_cw = np.asarray(T_cw, float).copy()
     X = np.asarray(X, float).copy()
     if len(edges.pose) == 0:
         return T_cw, X, 0
     lam = LAMBDA_INITIAL
     st = _Structure.build(edges, n_local, len(X), _work().begin())
-    lin = _Linearised(T_cw, X, edges, n_local, calib, st)
+    lin = _Linearised(T_cw, X, edges, n_local, calib, st, attitude=attitude)
     current = lin.projection      # the projection at (T_cw, X), in slot 0 of st.work
     slot = 1                      # where a step's projection goes
     it = 0
@@ -318,7 +325,8 @@ def bundle_adjust_points(T_cw: np.ndarray, n_local: int, X: np.ndarray, edges: S
             T_try, X_try = _apply(T_cw, X, dc, dp)
             proj = _project(T_try, X_try, edges, calib, st, slot)
             robust = _robust_cost(proj[0], proj[3], edges)
-            if robust[0] < lin.cost:
+            total = robust[0] + (attitude.cost(T_try) if attitude is not None else 0.0)
+            if total < lin.cost:
                 accepted = True
                 break
             lam *= LAMBDA_FACTOR
@@ -330,9 +338,9 @@ def bundle_adjust_points(T_cw: np.ndarray, n_local: int, X: np.ndarray, edges: S
         lam = max(lam / LAMBDA_FACTOR, 1e-12)
         # converged or out of iterations: stop before linearising at the new point (its Jacobians
         # would be used by no further step)
-        if old - robust[0] < relative_tol * old or it == max_iterations:
+        if old - total < relative_tol * old or it == max_iterations:
             break
-        lin = _Linearised(T_cw, X, edges, n_local, calib, st, projected=(proj, robust))
+        lin = _Linearised(T_cw, X, edges, n_local, calib, st, projected=(proj, robust), attitude=attitude)
     if final_projection is not None:
         final_projection.append(tuple(a.copy() for a in current[:2]))   # the next call reuses the arrays
     return T_cw, X, it

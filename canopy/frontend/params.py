@@ -386,6 +386,17 @@ class TrackingParams:
     # ... the bound with the noise as the octave's resampled window carries it (4/9 of white at octaves
     # >= 1; keypoint_uncertainty.sampled_noise_factors, docs/notes/s17-kittihaze.md). False: white.
     uncertain_stereo_sampled_noise: bool = False
+    # s25-attitude: each keyframe's up measured from its vertical segments (canopy.lines.vertical, through
+    # canopy.frontend.tracker_vertical) rides on the KeyframeData for mapping.attitude_prior; estimates whose
+    # sigma is above vertical_max_sigma_deg are not sent. False: no measurement (docs/notes/s25-attitude.md).
+    vertical_estimate: bool = False
+    vertical_max_sigma_deg: float = 2.0
+    # ... and every tracked frame's up (the same estimator, gated by the predicted pose; ~2.5 ms a frame) as a
+    # prior on its pitch and roll in the motion-only refinement, against the reference of the map segment's
+    # first measured keyframe (canopy.frontend.tracker_vertical). False: off.
+    vertical_track_prior: bool = False
+    # the estimator's sigma times this, in the keyframes' up_sigma_deg and the frames' term (1: as measured)
+    vertical_sigma_scale: float = 1.0
 
     def disparity_offset_for(self, extractor: str) -> float:
         """The calibrated disparity offset for keypoints found by ``extractor`` (Features.extractor)."""

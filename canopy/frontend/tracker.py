@@ -50,6 +50,7 @@ from canopy.frontend.track_health import LOST_TOO_FEW_MATCHES, image_noise_sigma
 from canopy.frontend.tracker_lines import TrackerLinesMixin
 from canopy.frontend.tracker_measurements import TrackerMeasurementsMixin
 from canopy.frontend.tracker_reloc import TrackerRelocalisationMixin
+from canopy.frontend.tracker_vertical import frame_attitude_term
 from canopy.frontend.tracker_segments import STATUS_LOST, STATUS_OK, TrackerSegmentsMixin
 from canopy.frontend.tracker_worker import (ExtractedFrame, StereoJob, TrackerFeaturesMixin, record_stage as _stage,
                                            stage_clock as _clock)
@@ -283,6 +284,8 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
                 var = p.motion_prior_pose_var_factor * self._prior_pose_var
             self._motion_prior = MotionPrior(T_pred_cw, np.radians(p.motion_prior_sigma_deg), p.motion_prior_sigma_m,
                                              pose_variance=var)
+        # tracking.vertical_track_prior: the frame's measured up as a prior on its pitch and roll (tracker_vertical)
+        self._attitude_term = frame_attitude_term(self, frame, T_pred_cw) if p.vertical_track_prior else None
         kp_words = as_words(feats.descriptors)
         view = self._map_view()
 

@@ -22,6 +22,7 @@ from canopy.frontend.keypoint_uncertainty import disparity_sigma
 from canopy.frontend.geometry import pose_information, project_stereo, stereo_pose_jacobian, transform
 from canopy.frontend.stereo import StereoMatches
 from canopy.frontend.stereo_silhouette import ContourParams, SilhouetteDetector
+from canopy.frontend.tracker_vertical import with_attitude
 from canopy.frontend.tracker_worker import StereoJob, record_stage as _stage, stage_clock as _clock
 
 _MP_DEBUG = bool(os.environ.get("CANOPY_MOTION_PRIOR_DEBUG"))  # print the gate's rotation std per refinement
@@ -171,6 +172,8 @@ class TrackerMeasurementsMixin:
         prior = getattr(self, "_motion_prior", None)
         if prior is not None and (line_obs is not None or not self._measurements_weak(T_cw, X, r, feats, obs, inliers)):
             prior = None
+        # tracking.vertical_track_prior / diagnose_pitch's oracle: the frame's measured up (tracker_vertical)
+        prior = with_attitude(prior, getattr(self, "_attitude_term", None))
         return super()._refine(T_cw, X, r, feats, obs, inliers=inliers, line_obs=line_obs, extra=prior)
 
     def _measurements_weak(self, T_cw, X, r, feats, obs, inliers) -> bool:

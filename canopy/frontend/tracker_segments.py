@@ -17,6 +17,7 @@ from canopy.frontend.matching import as_words
 from canopy.frontend.messages import KeyframeData, TrackingResult
 from canopy.frontend.stereo import StereoMatches
 from canopy.frontend.track_health import LOST_TOO_FEW_STEREO
+from canopy.frontend.tracker_vertical import keyframe_vertical
 from shared.arrays import unique_sorted
 from shared.types import StereoFrame
 
@@ -86,6 +87,11 @@ class TrackerSegmentsMixin:
             octave=feats.octave.astype(np.int32), landmark_ids=matched_ids.copy(), new_landmark_ids=new_ids,
             scale_factor=self.params.scale_factor, restart=restart,
             seen_ids=uids, seen_visible=seen_visible, seen_found=seen_found, **line_fields)
+        if self.params.vertical_estimate:   # the keyframe's measured up (canopy.frontend.tracker_vertical)
+            vert = keyframe_vertical(self)
+            if restart:
+                vert.restart()
+            kf.up_cam, kf.up_sigma_deg = vert.measure(frame.left, T_wc, frame.index)
         self._remember_keyframe(kf)
         self._ref_kf = frame.index
         self._T_ref = T_wc.copy()
