@@ -9,7 +9,7 @@ import pytest
 from canopy.frontend.geometry import project_stereo, se3_exp, se3_inv
 from canopy.frontend.params import TrackingParams
 from canopy.frontend.pose import refine_pose
-from canopy.frontend.vertical_gate import attitude_prior_wanted, attitude_std_deg
+from canopy.frontend.vertical_gate import attitude_prior_wanted, attitude_std_deg, weak_streak
 from shared.errors import ConfigError
 from shared.types import StereoCalibration
 
@@ -77,9 +77,21 @@ def test_gate_sends_the_up_only_where_no_far_structure_pins_the_rotation():
     assert not attitude_prior_wanted(np.inf, float("nan"), ratio=0.6)
 
 
+def test_gate_opens_only_after_a_stretch_of_weakly_held_keyframes():
+    """vertical_gate_keyframes = 3: an isolated weak keyframe (the camera turned toward a row) sends nothing;
+    the third weak keyframe in a row does, and a strong one closes the gate again."""
+    history: list = []
+    verdicts = [True, False, True, True, True, True, False, True]
+    assert [weak_streak(history, w, 3) for w in verdicts] == [False, False, False, False, True, True, False, False]
+    assert len(history) == 3
+    assert weak_streak([], True, 1)                       # 1: this keyframe alone
+
+
 def test_gate_settings_are_range_checked():
     with pytest.raises(ConfigError, match="vertical_gate_ratio"):
         TrackingParams(vertical_gate_ratio=-0.1)
     with pytest.raises(ConfigError, match="vertical_gate_far_baselines"):
         TrackingParams(vertical_gate_far_baselines=-1.0)
+    with pytest.raises(ConfigError, match="vertical_gate_keyframes"):
+        TrackingParams(vertical_gate_keyframes=0)
     assert TrackingParams().vertical_gate_ratio == 0.0    # default: no gate (and vertical_estimate off)

@@ -402,6 +402,8 @@ class TrackingParams:
     # the up's sigma (canopy.frontend.vertical_gate; docs/notes/s26-gate.md). 0: no gate (always sent).
     vertical_gate_ratio: float = 0.0
     vertical_gate_far_baselines: float = 40.0
+    # ... on this keyframe and the vertical_gate_keyframes - 1 before it (the haze is a stretch, not a frame)
+    vertical_gate_keyframes: int = 1
 
     def disparity_offset_for(self, extractor: str) -> float:
         """The calibrated disparity offset for keypoints found by ``extractor`` (Features.extractor)."""
