@@ -397,6 +397,13 @@ class TrackingParams:
     vertical_track_prior: bool = False
     # the estimator's sigma times this, in the keyframes' up_sigma_deg and the frames' term (1: as measured)
     vertical_sigma_scale: float = 1.0
+    # s26-gate: a keyframe sends its up only where its far pose inliers (beyond vertical_gate_far_baselines;
+    # 40: ORB-SLAM's ThDepth) hold its pitch/roll weakly: their own pitch/roll sigma >= vertical_gate_ratio x
+    # the up's sigma (canopy.frontend.vertical_gate; docs/notes/s26-gate.md). 0: no gate (always sent).
+    vertical_gate_ratio: float = 0.0
+    vertical_gate_far_baselines: float = 40.0
+    # ... on this keyframe and the vertical_gate_keyframes - 1 before it (the haze is a stretch, not a frame)
+    vertical_gate_keyframes: int = 1
 
     def disparity_offset_for(self, extractor: str) -> float:
         """The calibrated disparity offset for keypoints found by ``extractor`` (Features.extractor)."""

@@ -141,6 +141,9 @@ def validate_tracking_params(p: "TrackingParams") -> "TrackingParams":
     need(p.uncertain_stereo_min_noise >= 0, "uncertain_stereo_min_noise", "must be >= 0")
     need(p.vertical_max_sigma_deg > 0, "vertical_max_sigma_deg", "must be > 0")
     need(p.vertical_sigma_scale > 0, "vertical_sigma_scale", "must be > 0")
+    need(p.vertical_gate_ratio >= 0, "vertical_gate_ratio", "must be >= 0 (0: no gate)")
+    need(p.vertical_gate_far_baselines >= 0, "vertical_gate_far_baselines", "must be >= 0")
+    need(p.vertical_gate_keyframes >= 1, "vertical_gate_keyframes", "must be >= 1")
     need(p.vertical_estimate or not p.vertical_track_prior, "vertical_track_prior",
          "needs vertical_estimate (the keyframes' measurements set the reference)")
     return p

@@ -18,6 +18,7 @@ from canopy.frontend.messages import KeyframeData, TrackingResult
 from canopy.frontend.stereo import StereoMatches
 from canopy.frontend.track_health import LOST_TOO_FEW_STEREO
 from canopy.frontend.tracker_vertical import keyframe_vertical
+from canopy.frontend.vertical_gate import gate_keyframe_up
 from shared.arrays import unique_sorted
 from shared.types import StereoFrame
 
@@ -92,6 +93,9 @@ class TrackerSegmentsMixin:
             if restart:
                 vert.restart()
             kf.up_cam, kf.up_sigma_deg = vert.measure(frame.left, T_wc, frame.index)
+            # tracking.vertical_gate_ratio: only where the keyframe's points hold pitch/roll weakly
+            kf.up_cam, kf.up_sigma_deg = gate_keyframe_up(self, feats, stereo, T_wc, matched_ids, kf.up_cam,
+                                                          kf.up_sigma_deg, restart)
         self._remember_keyframe(kf)
         self._ref_kf = frame.index
         self._T_ref = T_wc.copy()
