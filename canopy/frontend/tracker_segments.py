@@ -95,7 +95,7 @@ class TrackerSegmentsMixin:
             kf.up_cam, kf.up_sigma_deg = vert.measure(frame.left, T_wc, frame.index)
             # tracking.vertical_gate_ratio: only where the keyframe's points hold pitch/roll weakly
             kf.up_cam, kf.up_sigma_deg = gate_keyframe_up(self, feats, stereo, T_wc, matched_ids, kf.up_cam,
-                                                          kf.up_sigma_deg, restart)
+                                                          kf.up_sigma_deg, vert.gate_history)
         self._remember_keyframe(kf)
         self._ref_kf = frame.index
         self._T_ref = T_wc.copy()

@@ -26,10 +26,13 @@ class KeyframeVertical:
         self.sigma_scale = float(sigma_scale)   # applied after the max_sigma_deg test
         self.up_world: np.ndarray | None = None
         self._last: tuple[int, np.ndarray, float] | None = None   # (frame index, up, sigma) of the last measurement
+        # tracking.vertical_gate_keyframes: the segment's last keyframes' gate verdicts (canopy.frontend.vertical_gate)
+        self.gate_history: list[bool] = []
 
     def restart(self) -> None:
         """A new map segment: its world is another one (no gate until its first measurement)."""
         self.up_world = None
+        self.gate_history.clear()   # the new segment's keyframes start their own streak
 
     def measure(self, image: np.ndarray, T_world_cam: np.ndarray, index: int = -1) -> tuple[np.ndarray, float]:
         """(up_cam (3,), sigma deg) of the frame, (NaN x 3, NaN) when the image tells too little. A keyframe

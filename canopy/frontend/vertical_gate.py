@@ -103,14 +103,12 @@ def weak_streak(history: list, weak: bool, keyframes: int) -> bool:
     return len(history) == keyframes and all(history)
 
 
-def gate_keyframe_up(tracker, feats, stereo, T_wc, matched_ids, up_cam, up_sigma_deg, restart=False):
-    """tracking.vertical_gate_ratio: (up_cam, sigma) unchanged where the prior is wanted, NaN otherwise."""
+def gate_keyframe_up(tracker, feats, stereo, T_wc, matched_ids, up_cam, up_sigma_deg, history: list):
+    """tracking.vertical_gate_ratio: (up_cam, sigma) unchanged where the prior is wanted, NaN otherwise.
+    ``history``: the map segment's verdicts (``KeyframeVertical.gate_history``, cleared on a restart)."""
     p = tracker.params
     if p.vertical_gate_ratio <= 0 and not _DEBUG:
         return up_cam, up_sigma_deg
-    history = tracker.__dict__.setdefault("_vertical_gate_history", [])
-    if restart:   # a new map segment: its keyframes start their own streak
-        history.clear()
     if not np.isfinite(up_sigma_deg):
         weak_streak(history, False, p.vertical_gate_keyframes)
         return up_cam, up_sigma_deg
