@@ -267,6 +267,14 @@ class TrackingParams:
     # information): the constant-velocity prediction 2 T_k-1 - T_k-2 carries ~5 x a pose's variance
     # when the poses' errors are independent. 0: the fixed sigmas above.
     motion_prior_pose_var_factor: float = 0.0
+    # > 0: motion-only refinement adds a prior that the step from the last frame follows the rig's
+    # direction of travel in the camera frame (a car's wheels do not slip sideways), learned from the
+    # median of the last travel_direction_window tracked steps of >= travel_direction_min_step_m, with
+    # this standard deviation across it (degrees; canopy.frontend.travel_direction). 0: off.
+    travel_direction_sigma_deg: float = 0.0
+    travel_direction_window: int = 20
+    travel_direction_min_steps: int = 5
+    travel_direction_min_step_m: float = 0.05
     # FAST threshold floor on noisy images: fast_noise_factor x the image noise sigma (Immerkaer
     # estimate); 0 switches it off. Clean images (the estimate sees fine texture too: 2-6 grey
     # levels on KITTI, EuRoC and the generated sequences) keep fast_threshold.

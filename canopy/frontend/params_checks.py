@@ -110,6 +110,11 @@ def validate_tracking_params(p: "TrackingParams") -> "TrackingParams":
     need(p.motion_prior_sigma_m >= 0, "motion_prior_sigma_m", "must be >= 0 (0: off)")
     need(p.motion_prior_min_rot_std_deg >= 0, "motion_prior_min_rot_std_deg", "must be >= 0 (0: always)")
     need(p.motion_prior_pose_var_factor >= 0, "motion_prior_pose_var_factor", "must be >= 0 (0: off)")
+    need(p.travel_direction_sigma_deg >= 0, "travel_direction_sigma_deg", "must be >= 0 (0: off)")
+    need(p.travel_direction_window >= 1, "travel_direction_window", "must be >= 1")
+    need(1 <= p.travel_direction_min_steps <= p.travel_direction_window, "travel_direction_min_steps",
+         "must be in [1, travel_direction_window]")
+    need(p.travel_direction_min_step_m > 0, "travel_direction_min_step_m", "must be > 0")
     need(p.max_predicted_frames >= 0, "max_predicted_frames", "must be >= 0")
     need(p.fast_noise_factor >= 0, "fast_noise_factor", "must be >= 0")
     need(p.pixel_sigma > 0, "pixel_sigma", "must be > 0")

@@ -44,6 +44,7 @@ from canopy.frontend.motion_check import ransac_or_prediction
 from canopy.frontend.messages import TrackingResult
 from canopy.frontend.params import TrackingParams
 from canopy.frontend.pose import MotionPrior
+from canopy.frontend.travel_direction import TravelDirection, travel_direction_term
 from canopy.frontend.stereo import StereoMatches
 from canopy.frontend.step_check import local_map_pose, recheck_step
 from canopy.frontend.track_health import LOST_TOO_FEW_MATCHES, image_noise_sigma, judge_pose
@@ -130,6 +131,9 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
         self.n_predicted = 0
         self._n_failed = 0            # consecutive frames without a trusted pose
         self._velocity_valid = False  # the constant-velocity model has seen two tracked frames
+        # the rig's direction of travel in its camera frame: a property of the rig, kept across map segments
+        self._travel = TravelDirection(self.params.travel_direction_window, self.params.travel_direction_min_steps,
+                                       self.params.travel_direction_min_step_m)
         # line features (issue 4), all inert unless params.use_lines
         self._lines_on = bool(self.params.use_lines)
         if self._lines_on:
@@ -286,6 +290,13 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
                                              pose_variance=var)
         # tracking.vertical_track_prior: the frame's measured up as a prior on its pitch and roll (tracker_vertical)
         self._attitude_term = frame_attitude_term(self, frame, T_pred_cw) if p.vertical_track_prior else None
+        # tracking.travel_direction_sigma_deg: the step follows the rig's direction of travel (travel_direction)
+        # (a step of one frame from a tracked one: not after a gap, whose T_last is older)
+        one_step = self._velocity_valid and self._n_failed == 0 and self._lost_streak == 0
+        self._travel_term = None
+        if p.travel_direction_sigma_deg > 0 and one_step:
+            self._travel_term = travel_direction_term(self._travel, self._T_last, self._velocity,
+                                                      p.travel_direction_sigma_deg)
         kp_words = as_words(feats.descriptors)
         view = self._map_view()
 
@@ -417,6 +428,8 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
         ref = self._ref_kf
         T_ref_cam = se3_inv(self._T_ref) @ T_wc
         self._after_frame(T_wc, feats, stereo)
+        if one_step and p.travel_direction_sigma_deg > 0:
+            self._travel.add(self._velocity)
         self._velocity_valid = True
         full_cov = None
         if info is not None:

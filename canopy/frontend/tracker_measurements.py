@@ -174,6 +174,8 @@ class TrackerMeasurementsMixin:
             prior = None
         # tracking.vertical_track_prior / diagnose_pitch's oracle: the frame's measured up (tracker_vertical)
         prior = with_attitude(prior, getattr(self, "_attitude_term", None))
+        # tracking.travel_direction_sigma_deg: the step across the rig's direction of travel (travel_direction)
+        prior = with_attitude(prior, getattr(self, "_travel_term", None))
         return super()._refine(T_cw, X, r, feats, obs, inliers=inliers, line_obs=line_obs, extra=prior)
 
     def _measurements_weak(self, T_cw, X, r, feats, obs, inliers) -> bool:
