@@ -8,7 +8,8 @@ import pytest
 from canopy.frontend import TrackingParams
 from canopy.frontend.geometry import project_stereo, rotation_angle, se3_exp, se3_inv, so3_exp
 from canopy.frontend.pose import refine_pose
-from canopy.frontend.travel_direction import TravelDirection, TravelDirectionTerm, travel_direction_term
+from canopy.frontend.travel_direction import (TravelDirection, TravelDirectionTerm, texture_gate_open,
+                                              travel_direction_term)
 from shared.errors import ConfigError
 from shared.types import StereoCalibration
 
@@ -116,8 +117,19 @@ def test_prior_cuts_the_sideways_error_of_a_pose_held_by_near_points():
     assert rms(len_on) < 1.2 * rms(len_off)
 
 
+def test_texture_gate_admits_hazy_raw_frames_only():
+    """travel_direction_max_texture: haze flattens the texture excess (KITTI 0.2-1.9 grey levels at beta
+    0.03-0.06, clean 3.4-4.5); a frame the enhancement changed has no robust sigma and stays out."""
+    assert texture_gate_open(None, None, 0.0)                 # 0: every frame
+    assert texture_gate_open(2.0, 3.2, 2.15)                  # hazy: 1.2 grey levels of texture
+    assert not texture_gate_open(1.8, 5.8, 2.15)              # clean KITTI: 4.0
+    assert not texture_gate_open(None, 3.0, 2.15)             # enhanced frame
+
+
 def test_bad_settings_are_rejected_by_name():
     with pytest.raises(ConfigError, match="travel_direction_sigma_deg"):
         TrackingParams(travel_direction_sigma_deg=-0.1)
     with pytest.raises(ConfigError, match="travel_direction_min_steps"):
         TrackingParams(travel_direction_window=3, travel_direction_min_steps=5)
+    with pytest.raises(ConfigError, match="travel_direction_max_texture"):
+        TrackingParams(travel_direction_max_texture=-1.0)

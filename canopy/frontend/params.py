@@ -275,6 +275,8 @@ class TrackingParams:
     travel_direction_window: int = 20
     travel_direction_min_steps: int = 5
     travel_direction_min_step_m: float = 0.05
+    # > 0: the prior joins only raw frames whose texture excess is below this (haze; 0: every frame)
+    travel_direction_max_texture: float = 0.0
     # FAST threshold floor on noisy images: fast_noise_factor x the image noise sigma (Immerkaer
     # estimate); 0 switches it off. Clean images (the estimate sees fine texture too: 2-6 grey
     # levels on KITTI, EuRoC and the generated sequences) keep fast_threshold.

@@ -115,6 +115,7 @@ def validate_tracking_params(p: "TrackingParams") -> "TrackingParams":
     need(1 <= p.travel_direction_min_steps <= p.travel_direction_window, "travel_direction_min_steps",
          "must be in [1, travel_direction_window]")
     need(p.travel_direction_min_step_m > 0, "travel_direction_min_step_m", "must be > 0")
+    need(p.travel_direction_max_texture >= 0, "travel_direction_max_texture", "must be >= 0 (0: every frame)")
     need(p.max_predicted_frames >= 0, "max_predicted_frames", "must be >= 0")
     need(p.fast_noise_factor >= 0, "fast_noise_factor", "must be >= 0")
     need(p.pixel_sigma > 0, "pixel_sigma", "must be > 0")

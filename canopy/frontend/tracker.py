@@ -44,7 +44,7 @@ from canopy.frontend.motion_check import ransac_or_prediction
 from canopy.frontend.messages import TrackingResult
 from canopy.frontend.params import TrackingParams
 from canopy.frontend.pose import MotionPrior
-from canopy.frontend.travel_direction import TravelDirection, travel_direction_term
+from canopy.frontend.travel_direction import TravelDirection, texture_gate_open, travel_direction_term
 from canopy.frontend.stereo import StereoMatches
 from canopy.frontend.step_check import local_map_pose, recheck_step
 from canopy.frontend.track_health import LOST_TOO_FEW_MATCHES, image_noise_sigma, judge_pose
@@ -294,7 +294,9 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
         # (a step of one frame from a tracked one: not after a gap, whose T_last is older)
         one_step = self._velocity_valid and self._n_failed == 0 and self._lost_streak == 0
         self._travel_term = None
-        if p.travel_direction_sigma_deg > 0 and one_step:
+        if (p.travel_direction_sigma_deg > 0 and one_step
+                and texture_gate_open(feats.robust_noise_sigma, getattr(self, "_frame_noise_sigma", None),
+                                      p.travel_direction_max_texture)):
             self._travel_term = travel_direction_term(self._travel, self._T_last, self._velocity,
                                                       p.travel_direction_sigma_deg)
         kp_words = as_words(feats.descriptors)

@@ -115,6 +115,18 @@ class TravelDirectionTerm:
         return np.zeros((6, 6))
 
 
+def texture_gate_open(robust_sigma: float | None, noise_sigma: float | None, max_texture: float) -> bool:
+    """``tracking.travel_direction_max_texture``: True when the prior may join this frame. 0: every frame;
+    > 0: raw frames whose texture excess (the mean |Laplacian| noise sigma minus the robust one, the
+    fill-in's haze test in canopy.frontend.stereo_fill) is below it: haze flattens it (KITTI 0.2-1.9 grey
+    levels at beta 0.03-0.06, clean 3.4-4.5). Frames the enhancement changed (no robust sigma) do not."""
+    if max_texture <= 0:
+        return True
+    if robust_sigma is None or noise_sigma is None:
+        return False
+    return float(noise_sigma) - float(robust_sigma) < max_texture
+
+
 def travel_direction_term(direction: TravelDirection, T_last_wc: np.ndarray, velocity: np.ndarray,
                           sigma_deg: float) -> TravelDirectionTerm | None:
     """The frame's term from the tracker's last pose and its constant-velocity model (None while the
