@@ -49,6 +49,17 @@ def test_learns_the_mount_and_predicts_the_next_chord_on_arcs():
     np.testing.assert_allclose(travel.expected_chord(T_last_cur), chord, atol=1e-9)
 
 
+def test_a_reversing_rig_keeps_its_line_of_travel():
+    """Backing up: the steps point the other way along the same line; the learned direction stays on it."""
+    poses = car_track(12, 1.0, np.array([0.2]))
+    travel = TravelDirection(window=20, min_steps=5, min_step_m=0.05)
+    steps = [se3_inv(a) @ b for a, b in zip(poses[:-1], poses[1:])]
+    for step in steps[:4] + [se3_inv(s) for s in steps[4:9]]:    # 4 forward, then 5 in reverse
+        travel.add(step)
+    forward_cam = MOUNT @ np.array([0.0, 0.0, 1.0])
+    assert abs(float(travel.forward() @ forward_cam)) > 1 - 1e-9
+
+
 def test_unknown_until_enough_moving_steps():
     travel = TravelDirection(window=10, min_steps=3, min_step_m=0.05)
     still = np.eye(4)

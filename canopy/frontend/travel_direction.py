@@ -53,8 +53,12 @@ class TravelDirection:
         n = float(np.linalg.norm(t))
         if not np.isfinite(n) or n < self.min_step_m:
             return  # standing still: the direction is the noise's
-        half = so3_exp(-0.5 * _rotation_vector(T_last_cur[:3, :3]))
-        self._forward.append(half @ (t / n))
+        forward = so3_exp(-0.5 * _rotation_vector(T_last_cur[:3, :3])) @ (t / n)
+        # a rig that reverses travels along the same line: the residual is blind to the sign, the median
+        # is not, so every step is stored on the side of the first one
+        if self._forward and float(forward @ self._forward[0]) < 0:
+            forward = -forward
+        self._forward.append(forward)
 
     def forward(self) -> np.ndarray | None:
         """The median direction of travel (unit, camera frame), None while too few steps are known."""
