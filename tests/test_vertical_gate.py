@@ -95,3 +95,15 @@ def test_gate_settings_are_range_checked():
     with pytest.raises(ConfigError, match="vertical_gate_keyframes"):
         TrackingParams(vertical_gate_keyframes=0)
     assert TrackingParams().vertical_gate_ratio == 0.0    # default: no gate (and vertical_estimate off)
+
+
+def test_sensor_gate_keeps_the_up_to_frames_the_enhancement_denoised_as_noisy():
+    """tracking.vertical_min_sensor_sigma: the dim noisy presets' frames (the enhancement's sigma 14.6-16.1) send
+    their up, clean preset frames (<= 9.21) and raw ones (0) do not; a run without the figure neither."""
+    from canopy.frontend.vertical_gate import noisy_enough
+
+    assert noisy_enough(None, 0.0) and noisy_enough(0.0, 0.0)          # 0: every keyframe
+    assert noisy_enough(15.2, 11.0)
+    assert not noisy_enough(9.21, 11.0) and not noisy_enough(0.0, 11.0) and not noisy_enough(None, 11.0)
+    with pytest.raises(ConfigError, match="vertical_min_sensor_sigma"):
+        TrackingParams(vertical_min_sensor_sigma=-1.0)

@@ -414,6 +414,10 @@ class TrackingParams:
     vertical_gate_far_baselines: float = 40.0
     # ... on this keyframe and the vertical_gate_keyframes - 1 before it (the haze is a stretch, not a frame)
     vertical_gate_keyframes: int = 1
+    # > 0: ... and only keyframes whose frame the enhancement denoised at a noise sigma of at least this (the
+    # enhancement's own figure, as stereo_fill_enhanced_min_sensor_sigma reads it: the dim noisy cells 14.6-16.1,
+    # every clean preset frame <= 9.21; raw frames 0). 0: every keyframe.
+    vertical_min_sensor_sigma: float = 0.0
 
     def disparity_offset_for(self, extractor: str) -> float:
         """The calibrated disparity offset for keypoints found by ``extractor`` (Features.extractor)."""

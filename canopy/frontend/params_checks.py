@@ -110,6 +110,7 @@ def validate_tracking_params(p: "TrackingParams") -> "TrackingParams":
     need(p.motion_prior_sigma_m >= 0, "motion_prior_sigma_m", "must be >= 0 (0: off)")
     need(p.motion_prior_min_rot_std_deg >= 0, "motion_prior_min_rot_std_deg", "must be >= 0 (0: always)")
     need(p.motion_prior_pose_var_factor >= 0, "motion_prior_pose_var_factor", "must be >= 0 (0: off)")
+    need(p.vertical_min_sensor_sigma >= 0, "vertical_min_sensor_sigma", "must be >= 0 (0: every keyframe)")
     need(p.travel_direction_sigma_deg >= 0, "travel_direction_sigma_deg", "must be >= 0 (0: off)")
     need(p.travel_direction_window >= 1, "travel_direction_window", "must be >= 1")
     need(1 <= p.travel_direction_min_steps <= p.travel_direction_window, "travel_direction_min_steps",

@@ -18,7 +18,7 @@ from canopy.frontend.messages import KeyframeData, TrackingResult
 from canopy.frontend.stereo import StereoMatches
 from canopy.frontend.track_health import LOST_TOO_FEW_STEREO
 from canopy.frontend.tracker_vertical import keyframe_vertical
-from canopy.frontend.vertical_gate import gate_keyframe_up
+from canopy.frontend.vertical_gate import gate_keyframe_up, noisy_enough
 from shared.arrays import unique_sorted
 from shared.types import StereoFrame
 
@@ -88,10 +88,12 @@ class TrackerSegmentsMixin:
             octave=feats.octave.astype(np.int32), landmark_ids=matched_ids.copy(), new_landmark_ids=new_ids,
             scale_factor=self.params.scale_factor, restart=restart,
             seen_ids=uids, seen_visible=seen_visible, seen_found=seen_found, **line_fields)
-        if self.params.vertical_estimate:   # the keyframe's measured up (canopy.frontend.tracker_vertical)
+        if self.params.vertical_estimate and restart:
+            keyframe_vertical(self).restart()   # a new segment: its own reference, gated keyframe or not
+        # the keyframe's measured up (tracker_vertical); tracking.vertical_min_sensor_sigma: on noisy frames only
+        if self.params.vertical_estimate and noisy_enough(getattr(self, "_frame_sensor_sigma", None),
+                                                          self.params.vertical_min_sensor_sigma):
             vert = keyframe_vertical(self)
-            if restart:
-                vert.restart()
             kf.up_cam, kf.up_sigma_deg = vert.measure(frame.left, T_wc, frame.index)
             # tracking.vertical_gate_ratio: only where the keyframe's points hold pitch/roll weakly
             kf.up_cam, kf.up_sigma_deg = gate_keyframe_up(self, feats, stereo, T_wc, matched_ids, kf.up_cam,

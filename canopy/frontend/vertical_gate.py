@@ -123,3 +123,13 @@ def gate_keyframe_up(tracker, feats, stereo, T_wc, matched_ids, up_cam, up_sigma
     if wanted:
         return up_cam, up_sigma_deg
     return np.full(3, np.nan), float("nan")
+
+
+def noisy_enough(sensor_sigma: float | None, min_sensor_sigma: float) -> bool:
+    """tracking.vertical_min_sensor_sigma: True when a keyframe may measure and send its up. 0: every keyframe;
+    > 0: only frames the enhancement denoised at a noise sigma (its own figure, ``info["noise_sigma"]``) of at
+    least this: the dim noisy presets read 14.6-16.1, every clean preset frame <= 9.21, raw frames 0
+    (docs/notes/s20-dimsigma.md). Without the figure (a caller that does not hand it over): no."""
+    if min_sensor_sigma <= 0:
+        return True
+    return sensor_sigma is not None and float(sensor_sigma) >= min_sensor_sigma
