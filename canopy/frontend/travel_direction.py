@@ -22,18 +22,16 @@ from __future__ import annotations
 
 from collections import deque
 
+import cv2
 import numpy as np
 
-from canopy.frontend.geometry import so3_exp
+from canopy.frontend.geometry import se3_inv, so3_exp
 
 
 def _rotation_vector(R: np.ndarray) -> np.ndarray:
-    """Axis-angle of a rotation matrix (the angles here are < 1 rad)."""
-    c = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
-    angle = float(np.arccos(c))
-    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-    s = np.sin(angle)
-    return w * (0.5 if s < 1e-9 else angle / (2.0 * s))
+    """Axis-angle of a rotation matrix (cv2.Rodrigues, as MotionPrior's residual)."""
+    rvec, _ = cv2.Rodrigues(np.ascontiguousarray(R, dtype=float))
+    return rvec.reshape(3)
 
 
 class TravelDirection:
@@ -139,4 +137,4 @@ def travel_direction_term(direction: TravelDirection, T_last_wc: np.ndarray, vel
     step = float(np.linalg.norm(velocity[:3, 3]))
     if chord is None or step < direction.min_step_m:
         return None
-    return TravelDirectionTerm(np.linalg.inv(T_last_wc), chord, np.radians(sigma_deg), step)
+    return TravelDirectionTerm(se3_inv(T_last_wc), chord, np.radians(sigma_deg), step)
