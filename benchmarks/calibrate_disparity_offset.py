@@ -83,11 +83,17 @@ def main() -> int:
     ap.add_argument("--extractor", choices=("opencv", "cells"), default=None,
                     help="keypoint extractor (default: the config's tracking.extractor); the cells extractor's "
                          "offset goes to tracking.disparity_offset_cells_px")
+    ap.add_argument("--normalise", choices=("centre", "mean"), default=None,
+                    help="sub-pixel SAD normalisation (default: the config's tracking.subpixel_normalise): the "
+                         "offset depends on the refinement as on the extractor; 'mean' is the zero-mean SAD of "
+                         "the hazy frames (canopy.frontend.stereo)")
     ap.add_argument("--out", default=str(ROOT / "docs" / "results" / "disparity_offset.json"))
     args = ap.parse_args()
     tp = load_run_config(args.config or args.dataset).tracking
     if args.extractor:
         tp = replace(tp, extractor=args.extractor)
+    if args.normalise:
+        tp = replace(tp, subpixel_normalise=args.normalise)
     tp = replace(tp, disparity_offset_px=0.0, disparity_offset_cells_px=0.0)
     src = open_source(args.dataset, args.path)
     est = pair_estimates(src, tp, min(len(src), args.max_frames), args.step)
