@@ -485,6 +485,7 @@ def main(argv=None) -> int:
               "quick": args.quick, "settings": list(args.settings), "datasets": list(datasets), "gains": list(gains), "betas": list(betas),
               "noise_levels": {n: {"full_well": NOISE_LEVELS[n][0], "read_noise": NOISE_LEVELS[n][1]} for n in noise},
               "methods": list(args.methods), "haze_depth": args.haze_depth,
+              "seed": args.seed,   # the noise draw (benchmarks/grid_draws.py sets several side by side)
               "orbslam3": {"available": orb is not None, "message": peer_msg},
               "criteria": {"ate_factor": ATE_FACTOR, "checks": checks}, "rows": rows}
     out_json = Path(args.out_dir) / "bench_degrade_grid.json"
