@@ -8,9 +8,10 @@ side: per (dataset, cell), Canopy ``auto``'s ATE on each draw, the bar (1.5x the
 reference run) and on how many draws each criterion holds (``bench_degrade_grid.issue9_checks``).
 
 The reference run supplies the clean rows and ORB-SLAM3's rows (typically the shipped grid,
-``docs/results/bench_degrade_grid.json``); each draw supplies its degraded ``auto`` rows (a run with
-``--skip-clean``, ORB-SLAM3 not re-run), which replace the reference's. ORB-SLAM3's verdict on every draw is
-therefore its reference run's, and a cell without ORB-SLAM3 beside it in the reference is left out.
+``docs/results/bench_degrade_grid.json``); each draw supplies its degraded rows (a run with ``--skip-clean``),
+which replace the reference's: its ``auto`` rows, and its ORB-SLAM3 rows where it ran ORB-SLAM3 on that draw
+(``--peers raw``). Where it did not, ORB-SLAM3's row is the reference run's, another draw; the table marks
+those verdicts with ``*``. A cell without ORB-SLAM3 beside it in either is left out.
 
     python benchmarks/grid_draws.py --reference docs/results/bench_degrade_grid.json \\
         0=/tmp/g0/bench_degrade_grid.json 1=/tmp/g1/bench_degrade_grid.json 2=/tmp/g2/bench_degrade_grid.json
@@ -28,6 +29,8 @@ sys.path.insert(0, str(ROOT))
 from benchmarks.bench_degrade_grid import ATE_FACTOR, issue9_checks  # noqa: E402
 from benchmarks.grid_table import _mm, _pct  # noqa: E402
 from shared.errors import InputError  # noqa: E402
+
+PEER = "orbslam3-raw"   # the peer the criteria compare with (bench_degrade_grid.issue9_checks)
 
 
 def _rows(path: Path) -> list[dict]:
@@ -51,14 +54,15 @@ def parse_draw(text: str) -> tuple[str, Path]:
 
 def draw_verdicts(reference: list[dict], draws: dict[str, list[dict]]) -> dict:
     """{(dataset, cell): {"ate": {seed: m | None}, "tracked": {seed: %}, "pass": {seed: bool | None},
-    "peer": {seed: bool}, "bar_m": m | None}} for every degraded cell a draw ran that the reference has
-    ORB-SLAM3 beside."""
+    "peer": {seed: bool}, "peer_other_draw": {seeds judged against the reference's ORB-SLAM3 row}, "bar_m": m | None}}
+    for every degraded cell a draw ran with ORB-SLAM3 beside it (the draw's own run or the reference's)."""
     out: dict = {}
     for seed, rows in draws.items():
         latest = {(r["dataset"], r["cell"], r["method"]): r for r in reference}
         mine = {(r["dataset"], r["cell"]) for r in rows if r["method"] == "auto" and r["cell"] != "clean"}
+        own_peer = {(r["dataset"], r["cell"]) for r in rows if r["method"] == PEER}
         for r in rows:
-            if r["method"] == "auto" and r["cell"] != "clean":
+            if r["cell"] != "clean":
                 latest[(r["dataset"], r["cell"], r["method"])] = r
         merged = list(latest.values())
         for c in issue9_checks(merged):
@@ -67,8 +71,10 @@ def draw_verdicts(reference: list[dict], draws: dict[str, list[dict]]) -> dict:
                 continue
             auto = latest[(c["dataset"], c["cell"], "auto")]
             clean = (latest.get((c["dataset"], "clean", "auto")) or {}).get("ate_rmse_m")
-            cell = out.setdefault(key, {"ate": {}, "tracked": {}, "pass": {}, "peer": {},
+            cell = out.setdefault(key, {"ate": {}, "tracked": {}, "pass": {}, "peer": {}, "peer_other_draw": set(),
                                         "bar_m": None if clean is None else ATE_FACTOR * clean})
+            if key not in own_peer:
+                cell["peer_other_draw"].add(seed)
             cell["ate"][seed] = auto.get("ate_rmse_m")
             cell["tracked"][seed] = auto.get("tracked_pct") or 0.0
             cell["pass"][seed] = c["pass"]
@@ -90,7 +96,12 @@ def table(verdicts: dict, seeds: list[str]) -> str:
         passes = [p for p in v["pass"].values() if p is not None]
         bar = "n/a (ORB < 50 %)" if not passes else f"{sum(passes)} of {len(passes)}"
         peer = f"{sum(v['peer'].values())} of {len(v['peer'])}"
+        if v["peer_other_draw"]:
+            peer += "*"
         out.append(f"| {d} | {cell} | {' / '.join(ates)} | {_mm(v['bar_m'])} | {bar} | {peer} |")
+    if any(v["peer_other_draw"] for v in verdicts.values()):
+        out.append("")
+        out.append("\\* some draws judged against ORB-SLAM3 on the reference run's draw (ORB-SLAM3 not run on theirs)")
     return "\n".join(out)
 
 

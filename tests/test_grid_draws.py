@@ -33,8 +33,21 @@ def test_each_draw_is_judged_against_the_reference_clean_run_and_peer():
     assert dark["pass"] == {"0": None} and dark["peer"] == {"0": True}   # ORB-SLAM3 tracks < half: no bar
     assert ("day-loop", "g0.02-b0-high") not in v
     text = table(v, ["0", "1", "2"])
-    assert "| day-loop | g0.15-b0-high | 12.0 / 16.0 / 25.0 (98 %) | 15.0 | 1 of 3 | 2 of 3 |" in text
-    assert "| day-loop | g0.06-b0-high | 40.0 / · / · | 15.0 | n/a (ORB < 50 %) | 1 of 1 |" in text
+    assert "| day-loop | g0.15-b0-high | 12.0 / 16.0 / 25.0 (98 %) | 15.0 | 1 of 3 | 2 of 3* |" in text
+    assert "| day-loop | g0.06-b0-high | 40.0 / · / · | 15.0 | n/a (ORB < 50 %) | 1 of 1* |" in text
+    assert "ORB-SLAM3 not run on theirs" in text
+
+
+def test_a_draw_with_its_own_orbslam3_run_is_judged_against_it():
+    """16 mm loses to the reference draw's ORB-SLAM3 (20 mm would not; 14 mm does) only on the draw where
+    ORB-SLAM3 itself ran at 14 mm; the reference's 20 mm stands in for the draw without a peer run."""
+    draws = {"3": [_row("g0.15-b0-high", "auto", 0.016), _row("g0.15-b0-high", "orbslam3-raw", 0.014)],
+             "4": [_row("g0.15-b0-high", "auto", 0.016)]}
+    v = draw_verdicts(REFERENCE, draws)[("day-loop", "g0.15-b0-high")]
+    assert v["peer"] == {"3": False, "4": True}
+    assert v["peer_other_draw"] == {"4"}
+    v = draw_verdicts(REFERENCE, {"3": draws["3"]})
+    assert "| 0 of 1 |" in table(v, ["3"]) and "not run on theirs" not in table(v, ["3"])
 
 
 def test_bad_arguments_name_the_input(tmp_path, capsys):
@@ -51,4 +64,4 @@ def test_bad_arguments_name_the_input(tmp_path, capsys):
     good = tmp_path / "good.json"
     good.write_text(json.dumps({"rows": [_row("g0.15-b0-high", "auto", 0.012)]}))
     assert main(["--reference", str(ref), f"7={good}"]) == 0
-    assert "| day-loop | g0.15-b0-high | 12.0 | 15.0 | 1 of 1 | 1 of 1 |" in capsys.readouterr().out
+    assert "| day-loop | g0.15-b0-high | 12.0 | 15.0 | 1 of 1 | 1 of 1* |" in capsys.readouterr().out
