@@ -30,6 +30,7 @@ class SequentialResult:
     mapping_timings: list[dict[str, float]] = field(default_factory=list)
     n_lost: int = 0
     map_lines: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))  # (L,2,3) endpoints A, B
+    mapper: object = None                  # the LocalMapper at the end: its keyframe and landmark stores
 
     @property
     def n_frames(self) -> int:
@@ -163,5 +164,5 @@ def run_sequential(source, tracking_params: TrackingParams | None = None,
     poses = frame_poses(mapper.keyframe_poses(), refs, rel, track_poses, statuses)
     traj = Trajectory(np.asarray(stamps), np.asarray(poses).reshape(-1, 4, 4), meta={"statuses": statuses})
     return SequentialResult(traj, mapper.keyframe_trajectory(), mapper.map_points(), statuses, kf_indices,
-                            track_t, map_t, tracker.n_lost, map_lines=mapper.map_lines())
+                            track_t, map_t, tracker.n_lost, map_lines=mapper.map_lines(), mapper=mapper)
 
