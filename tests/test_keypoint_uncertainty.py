@@ -187,3 +187,22 @@ def test_without_uncertain_depths_the_frame_after_initialisation_needs_no_retry(
             err = se3_inv(res.T_world_cam) @ src.ground_truth.poses[1]
             assert np.linalg.norm(err[:3, 3]) < 0.05
     assert status == {0.0: "predicted", 0.1: "ok"}
+
+
+def test_noisy_frames_measure_far_points_bearing_only_and_keep_their_landmarks():
+    """tracking.noisy_stereo_obs_max_depth_baselines (s30): on the noisy sensor's KITTI pair the stereo points
+    beyond 40 baselines lose their right column (bearing-only in refinement and BA), the landmarks they make
+    stay; on the clean pair (robust noise sigma under the gate) the keyframe is the default's."""
+    src, f, hazy = _hazy_kitti_pair(20, rng_left=2)
+    base = replace(load_run_config("kitti").tracking, parallel_extraction=False, noisy_stereo_obs_max_depth_baselines=0.0)
+    rule = replace(base, noisy_stereo_obs_max_depth_baselines=40.0)
+    _, kf0 = _first_keyframe(hazy, base, src.calibration)
+    _, kf1 = _first_keyframe(hazy, rule, src.calibration)
+    far = (kf0.u_right >= 0) & (kf0.depth >= 40.0 * src.calibration.baseline)
+    assert far.sum() > 20
+    np.testing.assert_array_equal(kf1.u_right, np.where(far, -1.0, kf0.u_right).astype(np.float32))
+    np.testing.assert_array_equal(kf1.new_landmark_ids >= 0, kf0.new_landmark_ids >= 0)
+    _, c0 = _first_keyframe(f, base, src.calibration)
+    _, c1 = _first_keyframe(f, rule, src.calibration)
+    assert ((c0.u_right >= 0) & (c0.depth >= 40.0 * src.calibration.baseline)).sum() > 20   # far points exist
+    np.testing.assert_array_equal(c0.u_right, c1.u_right)

@@ -396,6 +396,14 @@ class TrackingParams:
     # ... the bound with the noise as the octave's resampled window carries it (4/9 of white at octaves
     # >= 1; keypoint_uncertainty.sampled_noise_factors, docs/notes/s17-kittihaze.md). False: white.
     uncertain_stereo_sampled_noise: bool = False
+    # s30-offset: on frames whose robust noise sigma is >= uncertain_stereo_min_noise, stereo points beyond
+    # this many baselines are bearing-only in pose refinement and BA (ORB-SLAM's ThDepth, 40, on noisy
+    # frames only); their depth still initialises landmarks. With the map-calibrated KITTI offset the noisy
+    # sensor's path came out 0.16-0.22 % long while clean frames' was right; far stereo depths bearing-only
+    # brought it to 0.05-0.07 % on two draws, but over seven draws of the noisy lit cell it is bimodal
+    # (20-24 mm on five, 56 / 82 on two) and the hazy one is worse (57.5 -> 63.0 mm mean), so it is off
+    # everywhere (docs/notes/s30-offset.md). 0: off.
+    noisy_stereo_obs_max_depth_baselines: float = 0.0
     # s25-attitude: each keyframe's up measured from its vertical segments (canopy.lines.vertical, through
     # canopy.frontend.tracker_vertical) rides on the KeyframeData for mapping.attitude_prior; estimates whose
     # sigma is above vertical_max_sigma_deg are not sent. False: no measurement (docs/notes/s25-attitude.md).

@@ -146,6 +146,7 @@ def validate_tracking_params(p: "TrackingParams") -> "TrackingParams":
     need(p.noisy_extractor_n_features >= 0, "noisy_extractor_n_features", "must be >= 0 (0: n_features)")
     need(p.uncertain_stereo_max_rel_sigma >= 0, "uncertain_stereo_max_rel_sigma", "must be >= 0 (0: off)")
     need(p.uncertain_stereo_min_noise >= 0, "uncertain_stereo_min_noise", "must be >= 0")
+    need(p.noisy_stereo_obs_max_depth_baselines >= 0, "noisy_stereo_obs_max_depth_baselines", "must be >= 0 (0: off)")
     need(p.vertical_max_sigma_deg > 0, "vertical_max_sigma_deg", "must be > 0")
     need(p.vertical_sigma_scale > 0, "vertical_sigma_scale", "must be > 0")
     need(p.vertical_gate_ratio >= 0, "vertical_gate_ratio", "must be >= 0 (0: no gate)")

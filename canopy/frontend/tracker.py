@@ -94,6 +94,9 @@ class Tracker(TrackerMapViewMixin, TrackerFeaturesMixin, TrackerMeasurementsMixi
         # (and sub-pixel disparities biased) to measure translation; bearing only
         self._stereo_obs_depth = (self.params.stereo_obs_max_depth_baselines * calib.baseline
                                   if self.params.stereo_obs_max_depth_baselines > 0 else np.inf)
+        # ... and on noisy frames (tracking.noisy_stereo_obs_max_depth_baselines; tracker_measurements._noisy_far)
+        self._noisy_stereo_obs_depth = (self.params.noisy_stereo_obs_max_depth_baselines * calib.baseline
+                                        if self.params.noisy_stereo_obs_max_depth_baselines > 0 else np.inf)
         # map view = last update + provisional landmarks of keyframes not yet acknowledged
         self._update_view = MapView()
         self._provisional: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}

@@ -67,6 +67,7 @@ class TrackerMeasurementsMixin:
                 stereo = self._flag_contours(*self._contour_inputs, stereo)
                 _stage(timings, "contour", t0)
             self._uncertain = (stereo, self._uncertain_stereo(stereo))
+            self._noisy_far_mask = (stereo, self._noisy_far(stereo))
             self._stereo_last, self._stereo_obs = stereo, self._bearing_only_far(stereo)
         return self._stereo_last
 
@@ -75,6 +76,28 @@ class TrackerMeasurementsMixin:
         the option off, or the frame under the noise gate)."""
         flagged = getattr(self, "_uncertain", None)  # set per frame in _stereo
         return flagged[1] if flagged is not None and flagged[0] is stereo else None
+
+    def _frame_noise(self) -> float | None:
+        """The current frame's robust noise sigma (the extractor's, else measured on the left image's lower
+        half); None before the frame's images are known."""
+        if self._contour_inputs is None:
+            return None
+        left_img, _, feats = self._contour_inputs
+        noise = feats.robust_noise_sigma
+        return estimate_noise(left_img, rows_fraction=0.5) if noise is None else noise
+
+    def _noisy_far(self, stereo: StereoMatches) -> np.ndarray | None:
+        """Stereo points beyond ``noisy_stereo_obs_max_depth_baselines`` on a frame whose robust noise sigma
+        is at least ``uncertain_stereo_min_noise``; None when off or under the gate. On such frames far
+        points' stereo depths pull the path long (s30-offset: the noisy sensor's online path 0.16-0.22 %
+        longer than the clean frames' at the same calibration, while the whole map's BA gets the scale).
+        Off by default: bimodal over noise draws (docs/notes/s30-offset.md)."""
+        if not np.isfinite(self._noisy_stereo_obs_depth):
+            return None
+        noise = self._frame_noise()
+        if noise is None or noise < self.params.uncertain_stereo_min_noise:
+            return None
+        return stereo.valid & (stereo.depth >= self._noisy_stereo_obs_depth)
 
     def _uncertain_stereo(self, stereo: StereoMatches) -> np.ndarray | None:
         """Stereo points whose relative Cramér-Rao disparity sigma is at least
@@ -140,6 +163,9 @@ class TrackerMeasurementsMixin:
         uncertain = self._uncertain_mask(stereo)
         if uncertain is not None and self.params.uncertain_stereo_bearing_only:
             mono |= uncertain  # disparity the image cannot pin (_uncertain_stereo)
+        flagged = getattr(self, "_noisy_far_mask", None)  # set per frame in _stereo
+        if flagged is not None and flagged[0] is stereo and flagged[1] is not None:
+            mono |= flagged[1]  # far points of a noisy frame (_noisy_far)
         return mono
 
     def _bearing_only_far(self, stereo: StereoMatches) -> StereoMatches:
