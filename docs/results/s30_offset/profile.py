@@ -88,6 +88,11 @@ def main():
           f"{keep.mean():.1%} inliers at the shipped offset")
     gt = src.ground_truth.poses
     gt_pos = np.stack([gt[k][:3, 3] for k in order])
+    def kf_ate(Ts):
+        est = np.stack([se3_inv(t)[:3, 3] for t in Ts])
+        R, t, _ = umeyama_alignment(est.T, gt_pos.T)
+        return 1000 * np.sqrt(np.mean(np.sum((R @ est.T + t.reshape(3, 1) - gt_pos.T) ** 2, axis=0)))
+    print(f"keyframe SE(3) ATE: online (local BA only) {kf_ate(T0):.2f} mm, after the whole map's BA {kf_ate(T):.2f} mm")
     print("delta_px  robust_cost  cost_stereo_ur  sim3_scale  se3_ate_mm")
     for d in a.deltas:
         m = meas[keep].copy()
