@@ -30,6 +30,7 @@ import numpy as np
 from actors.runtime import Actor, ActorContext
 from actors.schedstat import thread_report, thread_schedstat
 from canopy.backend import LocalMapper
+from canopy.backend.final_ba import finish_map
 from canopy.loop.correction import corrections_from_arrays
 from canopy.loop.mapping_hooks import apply_loop_result, catch_up_pose, loop_keyframe_message, remap_landmarks
 from protocol.messages import EndOfStream, KeyframeData, LoopResult, MapSaved, MapSnapshot, SaveMapRequest
@@ -118,6 +119,11 @@ class LocalMappingActor(Actor):
             self.n_frames = int(msg.n_frames)
             if self.loop_on:
                 self._drain_loop_closer(msg, ctx)
+            if not self.mono:   # mapping.final_ba, before teardown's final snapshot
+                done = finish_map(self.mapper)
+                if done is not None:
+                    ctx.extra["final_ba"] = done
+                    self.map_changed = True
             ctx.stop()
 
     def _on_loop_result(self, result: LoopResult, update) -> bool:

@@ -31,6 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from canopy.backend import LocalMapper  # noqa: E402
+from canopy.backend.final_ba import finish_map  # noqa: E402
 from canopy.config import load_run_config, parse_value  # noqa: E402
 from canopy.degrade import disparity_sgbm  # noqa: E402
 from canopy.enhance import make_enhancer, pair_arguments, tracking_fast_arguments  # noqa: E402
@@ -142,6 +143,7 @@ def run(path, clean_path, dataset, enh_sets, track_sets, max_frames=None, per_fr
                    noise=res.noise_sigma, reason=res.lost_reason)
         recorder.add(res, fr.index, schedule, mapper)
         rows.append(row)
+    finish_map(mapper)   # mapping.final_ba, as the actors' local mapping at the end of the stream
     est, tracked = recorder.trajectory(mapper)
     gt = clean.ground_truth.poses[: len(est)]
     out = {"tracked": float(tracked.mean())}

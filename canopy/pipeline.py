@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from canopy.backend import LocalMapper, MappingParams
+from canopy.backend.final_ba import finish_map
 from canopy.frontend import STATUS_LOST, Tracker, TrackingParams, TrackingResult
 from shared.types import Trajectory
 
@@ -161,6 +162,7 @@ def run_sequential(source, tracking_params: TrackingParams | None = None,
             schedule.hold(update)
         refs.append(res.reference_kf_index)
         rel.append(None if res.T_ref_cam is None else res.T_ref_cam.copy())
+    finish_map(mapper)   # mapping.final_ba: the whole map adjusted once the sequence has ended
     poses = frame_poses(mapper.keyframe_poses(), refs, rel, track_poses, statuses)
     traj = Trajectory(np.asarray(stamps), np.asarray(poses).reshape(-1, 4, 4), meta={"statuses": statuses})
     return SequentialResult(traj, mapper.keyframe_trajectory(), mapper.map_points(), statuses, kf_indices,

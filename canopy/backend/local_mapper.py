@@ -83,6 +83,7 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         self._noise_cache: dict[tuple[bool, int, float], gtsam.noiseModel.Base] = {}
         self.timings: list[dict[str, float]] = []
         self.n_culled = 0
+        self.scale_factor = 1.2   # set from each keyframe (insert_keyframe)
         self.lines: dict[int, LineLandmark] = {}
         self.n_lines_culled = 0
         self._next_triangulated_id = self.params.triangulate_id_base
@@ -105,6 +106,7 @@ class LocalMapper(LocalBundleAdjustmentMixin, MapStoreAccess):
         t_all = time.perf_counter()
         t0 = time.perf_counter()
         rec = self._insert(kf)
+        self.scale_factor = float(kf.scale_factor)   # the pyramid's, for BA's sigmas after the run (final_ba)
         if self.params.attitude_prior:
             self.attitude.add(rec.index, rec.segment, rec.T_world_cam, kf.up_cam, kf.up_sigma_deg)
         # the observations of rec's landmarks as insertion left them (map_store.ObservationTable): read

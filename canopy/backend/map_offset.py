@@ -43,6 +43,7 @@ class MapProblem:
     X: np.ndarray
     edges: StereoEdges
     keyframe_ids: list
+    landmark_ids: list     # the rows of X
 
 
 @dataclass
@@ -64,14 +65,16 @@ def map_problem(keyframes: dict, landmarks: dict, pixel_sigma: float, scale_fact
         raise ValueError(f"the map has {len(kf_ids)} keyframes: the offset needs at least 3 (the camera must move)")
     order = kf_ids[1:] + kf_ids[:1]
     pose_of = {k: i for i, k in enumerate(order)}
-    lm_ids = sorted(landmarks)
+    lm_ids = []   # landmarks with at least one observation by these keyframes
     e_pose, e_pt, meas, octave = [], [], [], []
-    for j, lid in enumerate(lm_ids):
-        for k, kp in landmarks[lid].obs.items():
-            i = pose_of.get(k)
-            if i is None:
-                continue
-            kf = keyframes[k]
+    for lid in sorted(landmarks):
+        seen = [(pose_of[k], kp) for k, kp in landmarks[lid].obs.items() if k in pose_of]
+        if not seen:
+            continue
+        j = len(lm_ids)
+        lm_ids.append(lid)
+        for i, kp in seen:
+            kf = keyframes[order[i]]
             e_pose.append(i)
             e_pt.append(j)
             meas.append((kf.uv[kp, 0], kf.uv[kp, 1], kf.u_right[kp]))
@@ -84,7 +87,7 @@ def map_problem(keyframes: dict, landmarks: dict, pixel_sigma: float, scale_fact
     edges = StereoEdges(np.asarray(e_pose, np.int64), np.asarray(e_pt, np.int64), meas, stereo, sigma, huber)
     X = np.stack([np.asarray(landmarks[l].position, float) for l in lm_ids]) if lm_ids else np.zeros((0, 3))
     T_cw = np.stack([se3_inv(keyframes[k].T_world_cam) for k in order])
-    return MapProblem(T_cw, len(order) - 1, X, edges, order)
+    return MapProblem(T_cw, len(order) - 1, X, edges, order, lm_ids)
 
 
 def _subset(edges: StereoEdges, keep: np.ndarray) -> StereoEdges:

@@ -56,6 +56,10 @@ class MappingParams:
     # Off: points-only BA, unchanged. On: each line landmark is two Point3 endpoints; every
     # observation adds Eq. 10 (distances of the projected endpoints to the observed infinite
     # line; also in the right image where the keyframe matched the line in stereo).
+    # s30: at the end of the run, one bundle adjustment of the whole map (every keyframe but the first and
+    # every landmark; canopy.backend.final_ba) before the trajectory is written. Off: the written trajectory
+    # is the online one, as ORB-SLAM3's without a loop (docs/notes/s30-offset.md).
+    final_ba: bool = False
     use_lines: bool = False
     line_max_growth: float = 1.0        # a new observation may extend a line landmark by at most this x its length
     # "projection": one GenericProjectionFactor per endpoint whose measurement is the observed
