@@ -14,7 +14,7 @@ offset), then takes the whole map's bundle adjustment over a grid of extra offse
 (``canopy.backend.map_offset``): the offset printed is the config's plus the profile's minimum, with a
 standard error from the profile's curvature. Each point is seen from several keyframes metres apart there,
 so the map pins the offset more tightly than consecutive pairs do (KITTI 06 snippet, cells extractor:
-+0.105 +- 0.013 px against the pairs' +0.151 +- 0.035; the generated day-loop, whose rig is exact, -0.044).
++0.100 +- 0.013 px against the pairs' +0.151 +- 0.035; the generated day-loop, whose rig is exact, -0.047).
 
     PYTHONPATH=$PWD python benchmarks/calibrate_disparity_offset.py --dataset kitti
     PYTHONPATH=$PWD python benchmarks/calibrate_disparity_offset.py --dataset kitti --extractor cells \

@@ -29,6 +29,12 @@ class StereoEdges:
     sigma: np.ndarray    # (E,) px
     huber: np.ndarray    # (E,) Huber width in whitened units
 
+    def take(self, idx: np.ndarray) -> "StereoEdges":
+        """The edges ``idx`` (indices, or a boolean mask over the edges), in that order."""
+        idx = np.flatnonzero(idx) if np.asarray(idx).dtype == bool else np.asarray(idx)
+        return StereoEdges(self.pose[idx], self.point[idx], np.take(self.meas, idx, axis=0), self.stereo[idx],
+                           self.sigma[idx], self.huber[idx])
+
 
 _GEMV_ORDER = [1, 0, 2]   # the order in which OpenBLAS's 3x3 GEMV sums its products (see _ByPose.rotate)
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from canopy.backend.map_offset import _subset, map_problem
+from canopy.backend.map_offset import map_problem
 from canopy.backend.stereo_ba import bundle_adjust_points, edge_chi2
 from canopy.frontend.geometry import se3_inv
 
@@ -35,7 +35,7 @@ def final_bundle_adjust(mapper, iterations: int = FINAL_BA_ITERATIONS) -> dict:
     active = np.ones(len(prob.edges.pose), bool)
     T, X = prob.T_cw, prob.X
     for _ in range(p.ba_passes):
-        T, X, _ = bundle_adjust_points(T, prob.n_free, X, _subset(prob.edges, active), mapper.calib, iterations,
+        T, X, _ = bundle_adjust_points(T, prob.n_free, X, prob.edges.take(active), mapper.calib, iterations,
                                        relative_tol=p.ba_relative_tol)
         over = edge_chi2(T, X, prob.edges, mapper.calib, p.min_depth) > thr
         if not (active & over).any():

@@ -170,7 +170,7 @@ class LocalBundleAdjustmentMixin:
         all_edges = StereoEdges(pose_of_edge, point_of_edge, meas, stereo, sigma, huber)
         for _ in range(p.ba_passes):
             a = np.flatnonzero(active)
-            edges = StereoEdges(pose_of_edge[a], point_of_edge[a], np.take(meas, a, axis=0), stereo[a], sigma[a], huber[a])
+            edges = all_edges.take(a)
             final = []
             T_cw, X, _ = bundle_adjust_points(T_cw, len(local), X, edges, self.calib, p.ba_iterations,
                                               final_projection=final, relative_tol=p.ba_relative_tol,

@@ -16,8 +16,8 @@ curvature and the residuals' own scale give a standard error (Gauss-Newton: var 
 s^2 = 2 C_min / n_residuals, C the Huber cost, quadratic near the minimum).
 
 Measured (docs/notes/s30-offset.md): on the generated day-loop, whose rig is exact, the estimate is
--0.044 px (an offset of +0.2 px put into the tracker is found as +0.227); on the KITTI 06 snippet
-+0.105 px for the cells extractor, where the two-frame estimator gives +0.151 +- 0.035.
+-0.047 px (se 0.007; an offset of +0.2 px put into the tracker is found as +0.227 by one profile); on the
+KITTI 06 snippet +0.100 px (se 0.013) for the cells extractor, where the two-frame estimator gives +0.151 +- 0.035.
 """
 from __future__ import annotations
 
@@ -90,11 +90,6 @@ def map_problem(keyframes: dict, landmarks: dict, pixel_sigma: float, scale_fact
     return MapProblem(T_cw, len(order) - 1, X, edges, order, lm_ids)
 
 
-def _subset(edges: StereoEdges, keep: np.ndarray) -> StereoEdges:
-    return StereoEdges(edges.pose[keep], edges.point[keep], edges.meas[keep], edges.stereo[keep],
-                       edges.sigma[keep], edges.huber[keep])
-
-
 def _shifted(edges: StereoEdges, delta: float) -> StereoEdges:
     meas = edges.meas.copy()
     meas[:, 2] = np.where(edges.stereo, meas[:, 2] - delta, 0.0)   # d = u_l - u_r grows by delta
@@ -129,7 +124,7 @@ def map_offset_profile(problem: MapProblem, calib: StereoCalibration, chi2_stere
     T, X, _ = bundle_adjust_points(problem.T_cw, problem.n_free, problem.X, edges, calib, iterations,
                                    relative_tol=1e-7)
     keep = edge_chi2(T, X, edges, calib, min_depth) <= np.where(edges.stereo, chi2_stereo, chi2_mono)
-    inliers = _subset(edges, keep)
+    inliers = edges.take(keep)
     deltas = np.asarray(sorted(deltas), float)
     costs = np.empty(len(deltas))
     for j, d in enumerate(deltas):

@@ -52,14 +52,14 @@ class MappingParams:
     min_found_ratio: float = 0.25        # found / visible (ORB-SLAM MapPointCulling)
     min_depth: float = 0.05              # m; landmarks behind or on a camera are dropped
     fixed_pose_sigma: float = 1e-6       # prior sigma holding fixed keyframes (rad, m)
-    # --- line landmarks in local BA (AGRI Eq. 10-11; issue 4) ---------------------------
-    # Off: points-only BA, unchanged. On: each line landmark is two Point3 endpoints; every
-    # observation adds Eq. 10 (distances of the projected endpoints to the observed infinite
-    # line; also in the right image where the keyframe matched the line in stereo).
     # s30: at the end of the run, one bundle adjustment of the whole map (every keyframe but the first and
     # every landmark; canopy.backend.final_ba) before the trajectory is written. Off: the written trajectory
     # is the online one, as ORB-SLAM3's without a loop (docs/notes/s30-offset.md).
     final_ba: bool = False
+    # --- line landmarks in local BA (AGRI Eq. 10-11; issue 4) ---------------------------
+    # Off: points-only BA, unchanged. On: each line landmark is two Point3 endpoints; every
+    # observation adds Eq. 10 (distances of the projected endpoints to the observed infinite
+    # line; also in the right image where the keyframe matched the line in stereo).
     use_lines: bool = False
     line_max_growth: float = 1.0        # a new observation may extend a line landmark by at most this x its length
     # "projection": one GenericProjectionFactor per endpoint whose measurement is the observed
