@@ -56,7 +56,8 @@ def test_smoothed_refinement_halves_the_disparity_noise_without_a_bias():
     it, and on the clean pair the smoothed estimator must not move the disparities on average (a
     mean shift would change the scale against the calibrated disparity offset)."""
     src = open_source("kitti", KITTI)
-    base = replace(load_run_config("kitti").tracking, parallel_extraction=False)
+    # the smoothed pair's own vertex (configs/kitti.yaml takes the raw pair's since s31: the next test)
+    base = replace(load_run_config("kitti").tracking, parallel_extraction=False, subpixel_raw_vertex_search=0)
     on = replace(base, subpixel_denoise_sigma=4.0, subpixel_denoise_blur=1.5)
     always = replace(on, subpixel_denoise_sigma=1e-3)   # smooth the clean pair too: the same estimator
     noise_raw, noise_dn, shift, n_raw, n_dn = [], [], [], 0, 0
@@ -82,3 +83,49 @@ def test_smoothed_refinement_halves_the_disparity_noise_without_a_bias():
     # the estimator itself: no mean shift on clean pixels (measured +0.03 px in u_right)
     assert abs(float(np.mean(np.clip(np.concatenate(shift), -2, 2)))) < 0.06
     assert n_dn > 0.9 * n_raw, (n_raw, n_dn)        # the smoothed pair does not lose the matches
+
+
+def test_raw_vertex_around_the_smoothed_minimum_removes_the_blurs_depth_band_bias():
+    """tracking.subpixel_raw_vertex_search (s31): the Gaussian before the SAD moves the vertex by depth
+    band (KITTI's 8-20 px points read ~-0.07 px at blur 2 on the noisy sensor, which lengthens the path);
+    taking only the whole-pixel minimum from the smoothed pair and the vertex from the raw pair's SAD
+    around it must bring that band's mean shift against the clean pair's refinement near 0, and cut the
+    matches > 1 px off, without losing more than a tenth of the matches."""
+    src = open_source("kitti", KITTI)
+    vertex = replace(load_run_config("kitti").tracking, parallel_extraction=False)
+    assert vertex.subpixel_denoise_sigma > 0 and vertex.subpixel_denoise_blur == 2.0
+    assert vertex.subpixel_raw_vertex_search == 2                        # on in configs/kitti.yaml
+    base = replace(vertex, subpixel_raw_vertex_search=0)                  # the smoothed pair's vertex
+    shift = {"blur": [], "raw": []}
+    disp, valid = [], {"blur": 0, "raw": 0}
+    for i in range(0, 50, 5):
+        f = src.frame(i)
+        nl, nr = _noisy(f.left, 2 * i), _noisy(f.right, 2 * i + 1)
+        fl, fr = CellExtractor(base).extract(f.left), CellExtractor(base).extract(f.right)
+        ref = match_stereo(fl, fr, f.left, f.right, src.calibration, base)   # clean pair: raw SAD
+        runs = {"blur": match_stereo(fl, fr, nl, nr, src.calibration, base),
+                "raw": match_stereo(fl, fr, nl, nr, src.calibration, vertex)}
+        both = ref.valid & runs["blur"].valid & runs["raw"].valid
+        for k, m in runs.items():
+            shift[k].append(ref.u_right[both] - m.u_right[both])   # noisy - clean disparity
+            valid[k] += int(m.valid.sum())
+        disp.append(fl.uv[both, 0] - ref.u_right[both])
+    d = np.concatenate(disp)
+    mid = (d >= 8) & (d < 20)
+    stats = {}
+    for k in shift:
+        s = np.concatenate(shift[k])
+        stats[k] = (float(np.mean(s[mid & (np.abs(s) < 2)])), float(np.mean(np.abs(s) > 1.0)))
+    assert mid.sum() > 400, mid.sum()
+    assert stats["blur"][0] < -0.04, stats            # the bias the option removes is there
+    assert abs(stats["raw"][0]) < 0.025, stats
+    assert stats["raw"][1] < 0.6 * stats["blur"][1], stats
+    assert valid["raw"] > 0.9 * valid["blur"], valid
+    # the clean pair is under the smoothing gate: the option changes nothing there
+    f = src.frame(0)
+    fl, fr = CellExtractor(base).extract(f.left), CellExtractor(base).extract(f.right)
+    a = match_stereo(fl, fr, f.left, f.right, src.calibration, base)
+    b = match_stereo(fl, fr, f.left, f.right, src.calibration, vertex)
+    assert np.array_equal(a.u_right, b.u_right)
+    with pytest.raises(ConfigError, match="subpixel_raw_vertex_search"):
+        replace(base, subpixel_raw_vertex_search=base.subpixel_search + 1)

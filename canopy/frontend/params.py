@@ -326,6 +326,12 @@ class TrackingParams:
     # the Gaussian's sigma in px (level-0 pixels); 0 = the guided self-filter of canopy.enhance.noise.
     subpixel_denoise_sigma: float = 0.0
     subpixel_denoise_blur: float = 2.0  # the best sum over KITTI's 4 noisy cells (two noise draws)
+    # subpixel_raw_vertex_search > 0: the smoothed pair's SAD picks only the whole-pixel minimum, and the
+    # raw pair's SAD over +-subpixel_raw_vertex_search px around it gives the sub-pixel vertex (0: the
+    # smoothed pair's vertex). The Gaussian's vertex is biased by depth band on KITTI's clean frames
+    # (far points +0.15 px, 8-20 px -0.065 px at blur 2, where 0.05 px moves the scale 0.2 %); the raw
+    # vertex around the smoothed minimum is not (docs/notes/s31-vertex.md)
+    subpixel_raw_vertex_search: int = 0
     # Extractor by image noise (canopy.frontend.noisy_features.NoiseGatedExtractor), with
     # extractor: opencv: an image whose noise sigma (track_health.image_noise_sigma) is at least
     # noisy_extractor_sigma gets ORB-SLAM's per-cell extraction (the cells settings above, its

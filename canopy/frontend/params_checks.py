@@ -76,6 +76,8 @@ def validate_tracking_params(p: "TrackingParams") -> "TrackingParams":
     need(p.subpixel_normalise in ("centre", "mean"), "subpixel_normalise", "must be 'centre' or 'mean'")
     need(p.subpixel_denoise_sigma >= 0, "subpixel_denoise_sigma", "must be >= 0 (0: off)")
     need(p.subpixel_denoise_blur >= 0, "subpixel_denoise_blur", "must be >= 0 (0: guided filter)")
+    need(0 <= p.subpixel_raw_vertex_search <= p.subpixel_search, "subpixel_raw_vertex_search",
+         "must be in [0, subpixel_search] (0: off)")
     need(not p.subpixel_mean_on_noisy_haze or (p.subpixel_denoise_sigma > 0 and p.stereo_fill_max_texture > 0),
          "subpixel_mean_on_noisy_haze", "needs subpixel_denoise_sigma > 0 and stereo_fill_max_texture > 0 "
          "(the noisy gate and the haze test)")

@@ -133,7 +133,7 @@ def fill_unmatched_by_flow(matches: StereoMatches, left: Features, left_img: np.
     ur_flow, ok = flow_right_columns(ref_left, ref_right, left.uv[todo].astype(np.float64), params, max_disp)
     li = todo[ok]
     li, ur, disp = refine_and_accept(ref_left, ref_right, left, li, ur_flow[ok], scale_factors, max_disp,
-                                     params, noise_sigma, pyramids, normalise)
+                                     params, noise_sigma, pyramids, normalise, raw_pair=(left_img, right_img))
     u_right, depth = matches.u_right.copy(), matches.depth.copy()
     u_right[li] = ur
     depth[li] = calib.bf / disp

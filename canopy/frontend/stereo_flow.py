@@ -84,7 +84,7 @@ def match_stereo_flow(left: Features, left_img: np.ndarray, right_img: np.ndarra
     li = np.flatnonzero(ok)
     n_flow = len(li)
     li, ur, disp = refine_and_accept(ref_left, ref_right, left, li, ur_flow[li], scale_factors, max_disp,
-                                     params, noise_sigma)
+                                     params, noise_sigma, raw_pair=(left_img, right_img))
     u_right[li] = ur
     depth[li] = calib.bf / disp
     return StereoMatches(u_right, depth, n_candidates=n_flow)
