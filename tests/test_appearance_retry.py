@@ -45,9 +45,11 @@ def test_frame_after_initialisation_is_tracked_by_appearance_matches(noise):
     # twice the stereo points, and frame 1 finds its pose by RANSAC without the retry this tests; the
     # same for the uncertain-stereo rule on the noisy pair (frame 0's map keeps no 10 %-uncertain depths,
     # tests/test_keypoint_uncertainty.py), and for the zero-mean SAD on the noisy hazy pair (its better depths
-    # let the window matches find the pose too; tests/test_stereo_mean_on_fill.py)
+    # let the window matches find the pose too; tests/test_stereo_mean_on_fill.py), and for s31's raw SAD vertex
+    # on the smoothed noisy pair (tests/test_stereo_denoise.py: frame 1 is then tracked without the retry)
     p = replace(load_run_config("kitti").tracking, parallel_extraction=False, parallel_stereo=False,
-                stereo_fill=False, uncertain_stereo_max_rel_sigma=0.0, subpixel_mean_on_noisy_haze=False)
+                stereo_fill=False, uncertain_stereo_max_rel_sigma=0.0, subpixel_mean_on_noisy_haze=False,
+                subpixel_raw_vertex_search=0)
     results = {}
     for retry in (False, True):
         tracker = Tracker(src.calibration, replace(p, appearance_retry=retry))

@@ -1,5 +1,9 @@
 """Stereo disparity uncertainty (canopy.frontend.keypoint_uncertainty): the Cramér-Rao disparity sigma
-predicts which stereo matches scatter, on a generated stereo pair with an exact disparity."""
+predicts which stereo matches scatter, on a generated stereo pair with an exact disparity.
+
+The KITTI cases pin ``subpixel_raw_vertex_search`` to 0 (s31): their rules were built on, and are tested
+against, the smoothed pair's own SAD vertex; the raw vertex leaves fewer scattered far points to act on
+(tests/test_stereo_denoise.py)."""
 import cv2
 import numpy as np
 
@@ -110,7 +114,8 @@ def test_uncertain_stereo_points_create_no_landmarks_and_the_rest_is_unchanged()
     threshold (and only those), and those points' disparities are worse against the clean pair's SGBM
     than the kept ones'. Off, or on a clean pair (under the noise gate), the keyframe is the default's."""
     src, f, hazy = _hazy_kitti_pair(10, rng_left=0)
-    base = replace(load_run_config("kitti").tracking, parallel_extraction=False, uncertain_stereo_max_rel_sigma=0.0)
+    base = replace(load_run_config("kitti").tracking, parallel_extraction=False,
+                   subpixel_raw_vertex_search=0, uncertain_stereo_max_rel_sigma=0.0)
     rule = replace(base, uncertain_stereo_max_rel_sigma=0.05)  # the defaults: landmarks withheld, not bearing-only
     _, kf0 = _first_keyframe(hazy, base, src.calibration)
     tracker, kf1 = _first_keyframe(hazy, rule, src.calibration)
@@ -140,7 +145,8 @@ def test_uncertain_stereo_points_create_no_landmarks_and_the_rest_is_unchanged()
 
 def test_bearing_only_switch_drops_the_right_column_of_exactly_the_uncertain_points():
     src, f, hazy = _hazy_kitti_pair(20, rng_left=2)
-    base = replace(load_run_config("kitti").tracking, parallel_extraction=False, uncertain_stereo_max_rel_sigma=0.0)
+    base = replace(load_run_config("kitti").tracking, parallel_extraction=False,
+                   subpixel_raw_vertex_search=0, uncertain_stereo_max_rel_sigma=0.0)
     _, kf0 = _first_keyframe(hazy, base, src.calibration)
     tracker, kf1 = _first_keyframe(hazy, replace(base, uncertain_stereo_max_rel_sigma=0.05, uncertain_stereo_bearing_only=True,
                                                   uncertain_stereo_landmarks=True), src.calibration)
@@ -175,7 +181,8 @@ def test_without_uncertain_depths_the_frame_after_initialisation_needs_no_retry(
                                   degrade_image(f.right, cell, ray_r, rng=2 * i + 1)))
     # the zero-mean SAD on noisy haze off too (on in configs/kitti.yaml since s24): its better depths let frame 1
     # find its pose with the uncertain depths kept, which is not what this test is about
-    p = replace(load_run_config("kitti").tracking, parallel_extraction=False, parallel_stereo=False,
+    p = replace(load_run_config("kitti").tracking, parallel_extraction=False,
+                subpixel_raw_vertex_search=0, parallel_stereo=False,
                 stereo_fill=False, appearance_retry=False, subpixel_mean_on_noisy_haze=False)
     status = {}
     for tau in (0.0, 0.1):
@@ -194,7 +201,8 @@ def test_noisy_frames_measure_far_points_bearing_only_and_keep_their_landmarks()
     beyond 40 baselines lose their right column (bearing-only in refinement and BA), the landmarks they make
     stay; on the clean pair (robust noise sigma under the gate) the keyframe is the default's."""
     src, f, hazy = _hazy_kitti_pair(20, rng_left=2)
-    base = replace(load_run_config("kitti").tracking, parallel_extraction=False, noisy_stereo_obs_max_depth_baselines=0.0)
+    base = replace(load_run_config("kitti").tracking, parallel_extraction=False,
+                   subpixel_raw_vertex_search=0, noisy_stereo_obs_max_depth_baselines=0.0)
     rule = replace(base, noisy_stereo_obs_max_depth_baselines=40.0)
     _, kf0 = _first_keyframe(hazy, base, src.calibration)
     _, kf1 = _first_keyframe(hazy, rule, src.calibration)
