@@ -129,3 +129,17 @@ def test_raw_vertex_around_the_smoothed_minimum_removes_the_blurs_depth_band_bia
     assert np.array_equal(a.u_right, b.u_right)
     with pytest.raises(ConfigError, match="subpixel_raw_vertex_search"):
         replace(base, subpixel_raw_vertex_search=base.subpixel_search + 1)
+
+
+def test_raw_pair_pyramids_are_prebuilt_when_the_raw_vertex_reads_them():
+    """The stereo job builds the raw pair's SAD pyramids ahead only where the refinement will read them: a
+    frame under the smoothing gate, or (with the raw vertex) any frame."""
+    from types import SimpleNamespace
+
+    from canopy.frontend.tracker_worker import raw_pair_likely
+
+    noisy, clean = SimpleNamespace(robust_noise_sigma=6.0), SimpleNamespace(robust_noise_sigma=1.8)
+    smoothed = TrackingParams(subpixel_denoise_sigma=4.0)
+    vertex = TrackingParams(subpixel_denoise_sigma=4.0, subpixel_raw_vertex_search=2)
+    assert raw_pair_likely(clean, smoothed) and not raw_pair_likely(noisy, smoothed)
+    assert raw_pair_likely(clean, vertex) and raw_pair_likely(noisy, vertex)

@@ -71,11 +71,13 @@ def frame_stereo(left: Features, right: Features | None, frame: StereoFrame, cal
 
 
 def raw_pair_likely(left: Features, params: TrackingParams) -> bool:
-    """Whether the stereo refinement of a frame with these left features runs on the raw pair
-    (``noisy_features.refinement_pair`` smooths it when the robust noise σ reaches
-    ``subpixel_denoise_sigma``); True when that σ was not measured by the extractor."""
+    """Whether the stereo refinement of a frame with these left features reads the raw pair's pyramids:
+    it runs on the raw pair (``noisy_features.refinement_pair`` smooths it when the robust noise σ reaches
+    ``subpixel_denoise_sigma``), or takes its vertex from it (``subpixel_raw_vertex_search``,
+    ``stereo.raw_vertex``); True when that σ was not measured by the extractor."""
     sigma = left.robust_noise_sigma
-    return params.subpixel_denoise_sigma <= 0 or sigma is None or sigma < params.subpixel_denoise_sigma
+    return (params.subpixel_denoise_sigma <= 0 or params.subpixel_raw_vertex_search > 0 or sigma is None
+            or sigma < params.subpixel_denoise_sigma)
 
 
 class StereoJob:
