@@ -139,7 +139,7 @@ def test_raw_pair_pyramids_are_prebuilt_when_the_raw_vertex_reads_them():
     from canopy.frontend.tracker_worker import raw_pair_likely
 
     noisy, clean = SimpleNamespace(robust_noise_sigma=6.0), SimpleNamespace(robust_noise_sigma=1.8)
-    smoothed = TrackingParams(subpixel_denoise_sigma=4.0)
-    vertex = TrackingParams(subpixel_denoise_sigma=4.0, subpixel_raw_vertex_search=2)
+    smoothed = TrackingParams(subpixel_denoise_sigma=4.0, subpixel_raw_vertex_search=0)
+    vertex = TrackingParams(subpixel_denoise_sigma=4.0)   # the raw vertex is the default
     assert raw_pair_likely(clean, smoothed) and not raw_pair_likely(noisy, smoothed)
     assert raw_pair_likely(clean, vertex) and raw_pair_likely(noisy, vertex)

@@ -330,8 +330,9 @@ class TrackingParams:
     # raw pair's SAD over +-subpixel_raw_vertex_search px around it gives the sub-pixel vertex (0: the
     # smoothed pair's vertex). The Gaussian's vertex is biased by depth band on KITTI's clean frames
     # (far points +0.15 px, 8-20 px -0.065 px at blur 2, where 0.05 px moves the scale 0.2 %); the raw
-    # vertex around the smoothed minimum is not (docs/notes/s31-vertex.md)
-    subpixel_raw_vertex_search: int = 0
+    # vertex around the smoothed minimum is not (docs/notes/s31-vertex.md). On by default: it acts only where
+    # subpixel_denoise_sigma smooths a frame (off by default; configs/kitti.yaml turns both on)
+    subpixel_raw_vertex_search: int = 2
     # Extractor by image noise (canopy.frontend.noisy_features.NoiseGatedExtractor), with
     # extractor: opencv: an image whose noise sigma (track_health.image_noise_sigma) is at least
     # noisy_extractor_sigma gets ORB-SLAM's per-cell extraction (the cells settings above, its
