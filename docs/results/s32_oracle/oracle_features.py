@@ -28,6 +28,9 @@ def main():
     ap.add_argument("--cell", required=True)
     ap.add_argument("--left-features", choices=["degraded", "clean"], default="degraded")
     ap.add_argument("--disparity", choices=["degraded", "clean"], default="degraded")
+    ap.add_argument("--clean-args", choices=["cell", "none"], default="cell",
+                    help="the clean left image's extraction with the FAST arguments handed for the cell's enhanced "
+                         "frame (cell) or with none, as the clean run extracts (none)")
     ap.add_argument("--method", default="auto")
     ap.add_argument("--set", action="append", default=[], help="tracking.field=value / mapping.field=value")
     args = ap.parse_args()
@@ -51,6 +54,8 @@ def main():
         def extract(image, *ea, **ek):
             if args.left_features == "degraded" or image is not state.get("left"):
                 return orig_extract(image, *ea, **ek)
+            if args.clean_args == "none":
+                ea, ek = (), {}
             fc = orig_extract(clean.frame(state["i"]).left, *ea, **ek)
             return fc
         ex.extract = extract
@@ -85,7 +90,7 @@ def main():
     res, rows = run(Path(args.cell), clean_path, "kitti", {"method": args.method, **sets.get("enhancement", {})},
                     sets.get("tracking", {}), None, stereo=False, kind="kitti", map_sets=sets.get("mapping", {}))
     r = np.array([x.get("ratio", np.nan) for x in rows])
-    print(json.dumps({"cell": Path(args.cell).name, "left_features": args.left_features, "disparity": args.disparity, "set": args.set,
+    print(json.dumps({"cell": Path(args.cell).name, "left_features": args.left_features, "disparity": args.disparity, "clean_args": args.clean_args, "set": args.set,
                       "ate_mm": res["ate"] * 1e3, "ate_sim3_mm": res["ate_sim3"] * 1e3, "scale": res["scale"],
                       "step_ratio": float(np.nanmean(r[1:])), "tracked": res["tracked"]}))
 

@@ -1,0 +1,61 @@
+#!/usr/bin/env python
+"""s32: clean KITTI 06 with a random ``--drop`` fraction of the accepted stereo matches removed per frame (one draw
+per ``--seed``): how much does the path's scale move with *which* clean disparities the tracker gets?
+
+    PYTHONPATH=$PWD python docs/results/s32_oracle/subsample_stereo.py --drop 0.2 --seed 0
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[3]
+sys.path.insert(0, str(ROOT))
+
+import canopy.frontend.stereo as stereo  # noqa: E402
+from canopy.frontend.keypoint_uncertainty import row_gradient_energy  # noqa: E402
+from canopy.sources import BUNDLED_DATA  # noqa: E402
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--drop", type=float, default=0.2)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--far-only", type=float, default=0.0, help="drop only matches with disparity below this (px)")
+    ap.add_argument("--keep-contrast", choices=["random", "high", "low"], default="random",
+                    help="drop the --drop fraction with the lowest (high: keep the high) or highest row-gradient "
+                         "energy per window pixel (keypoint_uncertainty.row_gradient_energy) instead of at random")
+    ap.add_argument("--set", action="append", default=[], help="tracking.field=value")
+    args = ap.parse_args()
+    rng = np.random.default_rng(args.seed)
+    orig = stereo.refine_and_accept
+
+    def wrapped(*a, **k):
+        li, ur, disp = orig(*a, **k)
+        if args.keep_contrast != "random" and len(li):
+            ref_left, left, params, sf = a[0], a[2], a[7], a[5]
+            sxx, n = row_gradient_energy(ref_left, left.uv[li].astype(np.float64), sf[left.octave[li]],
+                                         params.subpixel_window)
+            e = sxx / n if args.keep_contrast == "high" else -sxx / n
+            keep = e >= np.quantile(e, args.drop)
+            return li[keep], ur[keep], disp[keep]
+        keep = rng.random(len(li)) >= args.drop
+        if args.far_only > 0:
+            keep |= disp >= args.far_only
+        return li[keep], ur[keep], disp[keep]
+    stereo.refine_and_accept = wrapped
+    from benchmarks.bench_enhance_diagnose import run
+    from canopy.config import parse_value
+    track_sets = {k.split("=", 1)[0].split(".")[1]: parse_value(k.split("=", 1)[1]) for k in args.set}
+    res, _ = run(BUNDLED_DATA["kitti"], BUNDLED_DATA["kitti"], "kitti", {"method": "auto"}, track_sets, None,
+                 stereo=False, kind="kitti")
+    print(json.dumps({"drop": args.drop, "far_only": args.far_only, "keep_contrast": args.keep_contrast, "set": args.set, "seed": args.seed, "ate_mm": res["ate"] * 1e3,
+                      "ate_sim3_mm": res["ate_sim3"] * 1e3, "scale": res["scale"]}))
+
+
+if __name__ == "__main__":
+    main()
