@@ -30,6 +30,7 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--cell", required=True)
     ap.add_argument("--select", choices=["degraded", "none"], default="degraded")
+    ap.add_argument("--set", action="append", default=[], help="tracking.field=value")
     args = ap.parse_args()
     clean = open_source("kitti", BUNDLED_DATA["kitti"])
     state = {}
@@ -40,8 +41,7 @@ def main():
         if "ex_r" not in state:
             state["ex_r"] = make_extractor(self.params)
         c = clean.frame(frame.index)
-        k2 = {kk: v for kk, v in k.items() if kk == "sensor_sigma" and False}
-        return orig_track(self, StereoFrame(frame.index, frame.timestamp, c.left, c.right), *a, **k2)
+        return orig_track(self, StereoFrame(frame.index, frame.timestamp, c.left, c.right), *a)
     Tracker.track = track
     orig_match = tw.match_stereo
     stats = {"clean": 0, "kept": 0}
@@ -64,9 +64,11 @@ def main():
         return st
     tw.match_stereo = match
     from benchmarks.bench_enhance_diagnose import run
-    res, _ = run(Path(args.cell), BUNDLED_DATA["kitti"], "kitti", {"method": "auto"}, {}, None, stereo=False,
+    from canopy.config import parse_value
+    track_sets = {a.split("=", 1)[0].split(".")[1]: parse_value(a.split("=", 1)[1]) for a in args.set}
+    res, _ = run(Path(args.cell), BUNDLED_DATA["kitti"], "kitti", {"method": "auto"}, track_sets, None, stereo=False,
                  kind="kitti")
-    print(json.dumps({"cell": Path(args.cell).name, "select": args.select, "ate_mm": res["ate"] * 1e3,
+    print(json.dumps({"cell": Path(args.cell).name, "select": args.select, "set": args.set, "ate_mm": res["ate"] * 1e3,
                       "ate_sim3_mm": res["ate_sim3"] * 1e3, "scale": res["scale"],
                       "kept_fraction": stats["kept"] / max(stats["clean"], 1)}))
 

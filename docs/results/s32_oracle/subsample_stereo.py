@@ -29,6 +29,7 @@ def main():
     ap.add_argument("--keep-contrast", choices=["random", "high", "low"], default="random",
                     help="drop the --drop fraction with the lowest (high: keep the high) or highest row-gradient "
                          "energy per window pixel (keypoint_uncertainty.row_gradient_energy) instead of at random")
+    ap.add_argument("--near-only", type=float, default=0.0, help="drop only matches with disparity above this (px)")
     ap.add_argument("--set", action="append", default=[], help="tracking.field=value")
     args = ap.parse_args()
     rng = np.random.default_rng(args.seed)
@@ -46,6 +47,8 @@ def main():
         keep = rng.random(len(li)) >= args.drop
         if args.far_only > 0:
             keep |= disp >= args.far_only
+        if args.near_only > 0:
+            keep |= disp <= args.near_only
         return li[keep], ur[keep], disp[keep]
     stereo.refine_and_accept = wrapped
     from benchmarks.bench_enhance_diagnose import run
@@ -53,7 +56,7 @@ def main():
     track_sets = {k.split("=", 1)[0].split(".")[1]: parse_value(k.split("=", 1)[1]) for k in args.set}
     res, _ = run(BUNDLED_DATA["kitti"], BUNDLED_DATA["kitti"], "kitti", {"method": "auto"}, track_sets, None,
                  stereo=False, kind="kitti")
-    print(json.dumps({"drop": args.drop, "far_only": args.far_only, "keep_contrast": args.keep_contrast, "set": args.set, "seed": args.seed, "ate_mm": res["ate"] * 1e3,
+    print(json.dumps({"drop": args.drop, "far_only": args.far_only, "near_only": args.near_only, "keep_contrast": args.keep_contrast, "set": args.set, "seed": args.seed, "ate_mm": res["ate"] * 1e3,
                       "ate_sim3_mm": res["ate_sim3"] * 1e3, "scale": res["scale"]}))
 
 
