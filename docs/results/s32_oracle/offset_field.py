@@ -1,5 +1,5 @@
 """s32: import to apply a disparity offset field in the stereo matcher: the config's constant offset plus
-KV * (v - H/2) / H + KU * (u - W/2) / W px (environment variables KV, KU, D0 = extra constant), on every
+KAPPA * d + KV * (v - H/2) / H + KU * (u - W/2) / W px (environment variables KAPPA, KV, KU, D0 = extra constant), on every
 accepted match of refine_and_accept (the descriptor matcher, the fill-in and the flow matcher)."""
 import os
 
@@ -12,6 +12,7 @@ import canopy.frontend.stereo_flow as sfl
 KV = float(os.environ.get("KV", "0"))
 KU = float(os.environ.get("KU", "0"))
 D0 = float(os.environ.get("D0", "0"))
+KAPPA = float(os.environ.get("KAPPA", "0"))  # a disparity scale error: + KAPPA * d (a baseline x focal error)
 _orig = st.refine_and_accept
 
 
@@ -21,7 +22,7 @@ def refine_and_accept(ref_left, ref_right, left, li, *a, **k):
         return li, ur, disp
     h, w = ref_left.shape[:2]
     uv = left.uv[li].astype(np.float64)
-    extra = D0 + KV * (uv[:, 1] - h / 2) / h + KU * (uv[:, 0] - w / 2) / w
+    extra = D0 + KAPPA * disp + KV * (uv[:, 1] - h / 2) / h + KU * (uv[:, 0] - w / 2) / w
     return li, ur - extra, disp + extra
 
 
