@@ -31,6 +31,10 @@ def main():
                          "energy per window pixel (keypoint_uncertainty.row_gradient_energy) instead of at random")
     ap.add_argument("--near-only", type=float, default=0.0, help="drop only matches with disparity above this (px)")
     ap.add_argument("--set", action="append", default=[], help="tracking.field=value")
+    ap.add_argument("--preset-path", default=None, help="a generated sequence folder (synthetic config) instead of KITTI")
+    ap.add_argument("--max-frames", type=int, default=None)
+    ap.add_argument("--band-quantile", type=float, default=0.0,
+                    help="> 0: --near-only / --far-only thresholds become this per-frame disparity quantile (far: 1 - q)")
     args = ap.parse_args()
     rng = np.random.default_rng(args.seed)
     orig = stereo.refine_and_accept
@@ -45,17 +49,25 @@ def main():
             keep = e >= np.quantile(e, args.drop)
             return li[keep], ur[keep], disp[keep]
         keep = rng.random(len(li)) >= args.drop
-        if args.far_only > 0:
-            keep |= disp >= args.far_only
-        if args.near_only > 0:
-            keep |= disp <= args.near_only
+        far_t, near_t = args.far_only, args.near_only
+        if args.band_quantile > 0 and len(disp):
+            far_t = np.quantile(disp, args.band_quantile) if args.far_only > 0 else 0
+            near_t = np.quantile(disp, 1 - args.band_quantile) if args.near_only > 0 else 0
+        if far_t > 0:
+            keep |= disp >= far_t
+        if near_t > 0:
+            keep |= disp <= near_t
         return li[keep], ur[keep], disp[keep]
     stereo.refine_and_accept = wrapped
     from benchmarks.bench_enhance_diagnose import run
     from canopy.config import parse_value
     track_sets = {k.split("=", 1)[0].split(".")[1]: parse_value(k.split("=", 1)[1]) for k in args.set}
-    res, _ = run(BUNDLED_DATA["kitti"], BUNDLED_DATA["kitti"], "kitti", {"method": "auto"}, track_sets, None,
-                 stereo=False, kind="kitti")
+    if args.preset_path:
+        p = Path(args.preset_path)
+        res, _ = run(p, p, "synthetic", {"method": "auto"}, track_sets, args.max_frames, stereo=False, kind="euroc")
+    else:
+        res, _ = run(BUNDLED_DATA["kitti"], BUNDLED_DATA["kitti"], "kitti", {"method": "auto"}, track_sets,
+                     args.max_frames, stereo=False, kind="kitti")
     print(json.dumps({"drop": args.drop, "far_only": args.far_only, "near_only": args.near_only, "keep_contrast": args.keep_contrast, "set": args.set, "seed": args.seed, "ate_mm": res["ate"] * 1e3,
                       "ate_sim3_mm": res["ate_sim3"] * 1e3, "scale": res["scale"]}))
 
