@@ -34,6 +34,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from canopy.frontend.stereo import parabola_minimum
+
 
 MIN_SHARPNESS = 1.0   # the SSD's rise one row either side of its minimum, over the minimum (see patch_row_offsets)
 
@@ -107,20 +109,15 @@ def patch_row_offsets(left: np.ndarray, right: np.ndarray, u_left: np.ndarray, v
         pr = R[vl[:, None, None] + s + rows, ur[:, None, None] + cols]
         diff = pr - pr.mean(axis=(1, 2), keepdims=True) - pl
         costs[:, j] = (diff * diff).sum(axis=(1, 2))
-    best = np.argmin(costs, axis=1)
-    interior = (best > 0) & (best < 2 * search)
+    best, delta, d2, ok = parabola_minimum(costs, search)   # the disparity's own vertex, along the rows
     i = np.arange(len(idx))
     b = np.clip(best, 1, 2 * search - 1)
-    d1, d2, d3 = costs[i, b - 1], costs[i, b], costs[i, b + 1]
-    denom = 2.0 * (d1 + d3 - 2.0 * d2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        delta = np.where(denom > 0, (d1 - d3) / denom, 0.0)   # the same parabola as the disparity's vertex
+    d1, d3 = costs[i, b - 1], costs[i, b + 1]
     # the aperture problem: a window of vertical edges only has a cost that barely changes with the row, and its
     # vertex is noise about its whole row (0): kept only where the cost rises by min_sharpness x its minimum
     # one row away, i.e. the window has texture across the rows
-    sharp = (d1 + d3 - 2.0 * d2) >= min_sharpness * np.maximum(d2, 1e-9)
-    ok = interior & (np.abs(delta) <= 1.0) & sharp
-    return idx[ok], (b - search + delta)[ok]
+    ok &= (d1 + d3 - 2.0 * d2) >= min_sharpness * np.maximum(d2, 1e-9)
+    return idx[ok], (best - search + delta)[ok]
 
 
 def _huber_fit(A: np.ndarray, y: np.ndarray, k: float, iterations: int) -> tuple[np.ndarray, float]:
