@@ -3,7 +3,7 @@ frames (key=value overrides them; key=drop removes one). Shows what those argume
 
     PYTHONPATH=$PWD python docs/results/s32_oracle/clean_frames_cell_args.py CELL [fast_threshold=20 ...]
 """
-import sys, numpy as np, json
+import sys
 from pathlib import Path
 from canopy.frontend import Tracker
 from canopy.sources import BUNDLED_DATA, open_source

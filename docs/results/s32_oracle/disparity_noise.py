@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[3]
 sys.path.insert(0, str(ROOT))
 
 import canopy.frontend.stereo as stereo  # noqa: E402
-from canopy.sources import BUNDLED_DATA  # noqa: E402
+from oracle_common import run_cell, step_ratio  # noqa: E402
 
 
 def main():
@@ -41,20 +41,10 @@ def main():
         keep = new > params.min_disparity
         return li[keep], left.uv[li[keep], 0] - new[keep], new[keep]
     stereo.refine_and_accept = wrapped
-    from benchmarks.bench_enhance_diagnose import run
-    from canopy.config import parse_value
-    sets = {}
-    for s_ in args.set:
-        k, v = s_.split("=", 1)
-        sec, f = k.split(".")
-        sets.setdefault(sec, {})[f] = parse_value(v)
-    path = Path(args.cell) if args.cell else BUNDLED_DATA["kitti"]
-    res, rows = run(path, BUNDLED_DATA["kitti"], "kitti", {"method": "auto", **sets.get("enhancement", {})},
-                    sets.get("tracking", {}), None, stereo=False, kind="kitti", map_sets=sets.get("mapping", {}))
-    r = np.array([x.get("ratio", np.nan) for x in rows])
+    res, rows = run_cell(args.cell, args.set)
     print(json.dumps({"sigma": args.sigma, "seed": args.seed, "octave": args.scale_by_octave, "set": args.set,
                       "ate_mm": res["ate"] * 1e3, "ate_sim3_mm": res["ate_sim3"] * 1e3, "scale": res["scale"],
-                      "step_ratio": float(np.nanmean(r[1:]))}))
+                      "step_ratio": step_ratio(rows)}))
 
 
 if __name__ == "__main__":

@@ -19,6 +19,7 @@ ROOT = Path(__file__).resolve().parents[3]
 sys.path.insert(0, str(ROOT))
 
 from canopy.frontend import Tracker  # noqa: E402
+from oracle_common import run_cell, step_ratio  # noqa: E402
 
 
 def main():
@@ -49,19 +50,9 @@ def main():
         ex.extract = extract
     Tracker.__init__ = init
 
-    from benchmarks.bench_enhance_diagnose import run
-    from canopy.config import parse_value
-    from canopy.sources import BUNDLED_DATA
-    sets = {}
-    for s in args.set:
-        k, v = s.split("=", 1)
-        sec, f = k.split(".")
-        sets.setdefault(sec, {})[f] = parse_value(v)
-    res, rows = run(BUNDLED_DATA["kitti"], BUNDLED_DATA["kitti"], "kitti", {"method": "auto", **sets.get("enhancement", {})},
-                    sets.get("tracking", {}), None, stereo=False, kind="kitti", map_sets=sets.get("mapping", {}))
-    r = np.array([x.get("ratio", np.nan) for x in rows])
+    res, rows = run_cell(None, args.set)
     print(json.dumps({"p": args.p, "seed": args.seed, "ate_mm": res["ate"] * 1e3, "ate_sim3_mm": res["ate_sim3"] * 1e3,
-                      "scale": res["scale"], "step_ratio": float(np.nanmean(r[1:])), "tracked": res["tracked"]}))
+                      "scale": res["scale"], "step_ratio": step_ratio(rows), "tracked": res["tracked"]}))
 
 
 if __name__ == "__main__":

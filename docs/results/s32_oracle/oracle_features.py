@@ -21,6 +21,7 @@ sys.path.insert(0, str(ROOT))
 import canopy.frontend.stereo as stereo  # noqa: E402
 from canopy.frontend import Tracker  # noqa: E402
 from canopy.sources import BUNDLED_DATA, open_source  # noqa: E402
+from oracle_common import clean_disparity, run_cell, step_ratio  # noqa: E402
 
 
 def main():
@@ -70,29 +71,16 @@ def main():
                                 pyramids, normalise, raw_pair)
             if len(li) == 0:
                 return li, ur, disp
-            c = clean.frame(state["i"])
-            off = params.disparity_offset_for(left.extractor)
             uvl = left.uv[li].astype(np.float64)
-            urc, _, okc = stereo.subpixel_refine(c.left, c.right, uvl, ur + off, left.octave[li], scale_factors,
-                                                 params.subpixel_window, 2, "centre", None)
-            dc = uvl[:, 0] - (urc - off)
+            dc, okc = clean_disparity(clean.frame(state["i"]), left, li, ur, params, scale_factors)
             keep = okc & (np.abs(disp - dc) <= 1.0) & (dc > params.min_disparity)
             return li[keep], uvl[keep, 0] - dc[keep], dc[keep]
         stereo.refine_and_accept = wrapped
 
-    from benchmarks.bench_enhance_diagnose import run
-    from canopy.config import parse_value
-    sets = {}
-    for s_ in args.set:
-        k, v = s_.split("=", 1)
-        sec, f = k.split(".")
-        sets.setdefault(sec, {})[f] = parse_value(v)
-    res, rows = run(Path(args.cell), clean_path, "kitti", {"method": args.method, **sets.get("enhancement", {})},
-                    sets.get("tracking", {}), None, stereo=False, kind="kitti", map_sets=sets.get("mapping", {}))
-    r = np.array([x.get("ratio", np.nan) for x in rows])
+    res, rows = run_cell(args.cell, args.set, args.method)
     print(json.dumps({"cell": Path(args.cell).name, "left_features": args.left_features, "disparity": args.disparity, "clean_args": args.clean_args, "set": args.set,
                       "ate_mm": res["ate"] * 1e3, "ate_sim3_mm": res["ate_sim3"] * 1e3, "scale": res["scale"],
-                      "step_ratio": float(np.nanmean(r[1:])), "tracked": res["tracked"]}))
+                      "step_ratio": step_ratio(rows), "tracked": res["tracked"]}))
 
 
 if __name__ == "__main__":

@@ -24,6 +24,7 @@ from canopy.frontend import Tracker  # noqa: E402
 from canopy.frontend.cell_extractor import make_extractor  # noqa: E402
 from canopy.sources import BUNDLED_DATA, open_source  # noqa: E402
 from shared.types import StereoFrame  # noqa: E402
+from oracle_common import run_cell  # noqa: E402
 
 
 def main():
@@ -63,11 +64,7 @@ def main():
         st.depth[~keep] = -1.0
         return st
     tw.match_stereo = match
-    from benchmarks.bench_enhance_diagnose import run
-    from canopy.config import parse_value
-    track_sets = {a.split("=", 1)[0].split(".")[1]: parse_value(a.split("=", 1)[1]) for a in args.set}
-    res, _ = run(Path(args.cell), BUNDLED_DATA["kitti"], "kitti", {"method": "auto"}, track_sets, None, stereo=False,
-                 kind="kitti")
+    res, _ = run_cell(args.cell, args.set)
     print(json.dumps({"cell": Path(args.cell).name, "select": args.select, "set": args.set, "ate_mm": res["ate"] * 1e3,
                       "ate_sim3_mm": res["ate_sim3"] * 1e3, "scale": res["scale"],
                       "kept_fraction": stats["kept"] / max(stats["clean"], 1)}))

@@ -27,7 +27,8 @@ sys.path.insert(0, str(ROOT))
 
 import canopy.frontend.stereo as stereo  # noqa: E402
 from canopy.frontend import Tracker  # noqa: E402
-from canopy.sources import open_source  # noqa: E402
+from canopy.sources import BUNDLED_DATA, open_source  # noqa: E402
+from oracle_common import clean_disparity, run_cell  # noqa: E402
 
 BANDS = np.array([0, 3, 5, 8, 12, 20, 40, 1e9])
 STATE = {"i": None, "errs": []}
@@ -40,14 +41,12 @@ def band_of(d):
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--cell", required=True)
-    ap.add_argument("--clean", default=None)
     ap.add_argument("--mode", choices=["none", "clean", "drop", "debias"], default="none")
     ap.add_argument("--bias", default=None, help="JSON of band means (debias / spread)")
     ap.add_argument("--method", default="auto")
     ap.add_argument("--set", action="append", default=[])
     args = ap.parse_args()
-    from canopy.sources import BUNDLED_DATA
-    clean_path = args.clean or str(BUNDLED_DATA["kitti"])
+    clean_path = BUNDLED_DATA["kitti"]
     clean = open_source("kitti", clean_path)
     bias = np.array(json.load(open(args.bias))["band_mean"]) if args.bias else np.zeros(len(BANDS) - 1)
 
@@ -65,12 +64,8 @@ def main():
                             pyramids, normalise, raw_pair)
         if len(li) == 0:
             return li, ur, disp
-        c = clean.frame(STATE["i"])
-        off = params.disparity_offset_for(left.extractor)
         uvl = left.uv[li].astype(np.float64)
-        urc, _, okc = stereo.subpixel_refine(c.left, c.right, uvl, ur + off, left.octave[li], scale_factors,
-                                             params.subpixel_window, 2, "centre", None)
-        dc = uvl[:, 0] - (urc - off)
+        dc, okc = clean_disparity(clean.frame(STATE["i"]), left, li, ur, params, scale_factors)
         err = disp - dc
         good = okc & (np.abs(err) <= 1.0)
         STATE["errs"].append(np.stack([dc[good], err[good]], 1))
@@ -89,17 +84,7 @@ def main():
         return li[keep], uvl[keep, 0] - new, new
     stereo.refine_and_accept = wrapped
 
-    from benchmarks.bench_enhance_diagnose import run
-    from canopy.config import parse_value
-    settings = []
-    for s in args.set:
-        k, v = s.split("=", 1)
-        sec, f = k.split(".")
-        settings.append((sec, f, parse_value(v)))
-    enh_sets = {"method": args.method, **{f: v for s_, f, v in settings if s_ == "enhancement"}}
-    res, rows = run(Path(args.cell), Path(clean_path), "kitti", enh_sets,
-                    {f: v for s_, f, v in settings if s_ == "tracking"}, None, stereo=False, kind="kitti",
-                    map_sets={f: v for s_, f, v in settings if s_ == "mapping"})
+    res, rows = run_cell(args.cell, args.set, args.method)
     decisions = {}
     for r in rows:
         decisions[r["method"]] = decisions.get(r["method"], 0) + 1

@@ -18,7 +18,7 @@ sys.path.insert(0, str(ROOT))
 
 import canopy.frontend.stereo as stereo  # noqa: E402
 from canopy.frontend.keypoint_uncertainty import row_gradient_energy  # noqa: E402
-from canopy.sources import BUNDLED_DATA  # noqa: E402
+from oracle_common import run_cell  # noqa: E402
 
 
 def main():
@@ -59,15 +59,10 @@ def main():
             keep |= disp <= near_t
         return li[keep], ur[keep], disp[keep]
     stereo.refine_and_accept = wrapped
-    from benchmarks.bench_enhance_diagnose import run
-    from canopy.config import parse_value
-    track_sets = {k.split("=", 1)[0].split(".")[1]: parse_value(k.split("=", 1)[1]) for k in args.set}
     if args.preset_path:
-        p = Path(args.preset_path)
-        res, _ = run(p, p, "synthetic", {"method": "auto"}, track_sets, args.max_frames, stereo=False, kind="euroc")
+        res, _ = run_cell(args.preset_path, args.set, config="synthetic", kind="euroc", max_frames=args.max_frames)
     else:
-        res, _ = run(BUNDLED_DATA["kitti"], BUNDLED_DATA["kitti"], "kitti", {"method": "auto"}, track_sets,
-                     args.max_frames, stereo=False, kind="kitti")
+        res, _ = run_cell(None, args.set, max_frames=args.max_frames)
     print(json.dumps({"drop": args.drop, "far_only": args.far_only, "near_only": args.near_only, "keep_contrast": args.keep_contrast, "set": args.set, "seed": args.seed, "ate_mm": res["ate"] * 1e3,
                       "ate_sim3_mm": res["ate_sim3"] * 1e3, "scale": res["scale"]}))
 
